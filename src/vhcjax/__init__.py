@@ -1,0 +1,36 @@
+"""vhcjax: periodic gaits of passive walkers and other hybrid mechanical systems, in JAX.
+
+Importing vhcjax enables float64 in JAX (`jax_enable_x64`): Newton solves to 1e-12 and
+exact event location need it; float32 results are not meaningful here.
+"""
+
+import importlib.metadata
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+from ._compass_gait import CompassGait as CompassGait
+from ._hybrid import (
+    DEFAULT_CONFIG as DEFAULT_CONFIG,
+    FAST_CONFIG as FAST_CONFIG,
+    Simulation as Simulation,
+    SolverConfig as SolverConfig,
+    StepResult as StepResult,
+    simulate as simulate,
+    step as step,
+)
+from ._mechanics import (
+    acceleration as acceleration,
+    augmented_impact as augmented_impact,
+    coriolis_matrix as coriolis_matrix,
+    gravity_vector as gravity_vector,
+    mass_matrix as mass_matrix,
+)
+from ._model import WalkerModel as WalkerModel
+from ._results import RESULTS as RESULTS, result_codes as result_codes, result_names as result_names
+
+try:
+    __version__ = importlib.metadata.version("vhcjax")
+except importlib.metadata.PackageNotFoundError:  # running from a source tree
+    __version__ = "0.0.0"

@@ -1,0 +1,99 @@
+"""The interface every walker model implements: energies, contact point, guard, relabelling.
+
+A model is an `eqx.Module` whose physical parameters are float leaves, so `jax.vmap` and
+`jax.grad` over masses, lengths, gravity and slope work out of the box. From the
+energies, `vhcjax._mechanics` derives the equations of motion and the impact map.
+"""
+
+import abc
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from . import _mechanics as mech
+
+
+class WalkerModel(eqx.Module):
+    """Abstract single-domain hybrid Lagrangian system with a point-foot heel strike.
+
+    Subclasses implement:
+
+    - `kinetic_energy(q, dq, base_velocity=None)`: kinetic energy with the stance foot
+      moving at `base_velocity` (zero or `None` while it is pinned); used for the
+      dynamics and for the augmented impact map (thesis 3.19-3.28).
+    - `potential_energy(q)`.
+    - `contact_point(q)`: the impacting foot relative to the stance foot (world frame).
+    - `guard(q)`: scalar, positive during the swing, crossing zero *downward* at heel
+      strike and never on mid-swing scuffing.
+    - `relabel(q, dq)`: the coordinate swap of the legs at impact (thesis 3.32).
+    - `fallen(q)`: boolean, the walker has fallen (hip on the ground, legs out of range).
+    - `slope_normal`: unit normal of the walking surface (world frame).
+    - `time_scale`: a characteristic time (s), used for default time limits.
+    """
+
+    n_dof: ClassVar[int]
+
+    @abc.abstractmethod
+    def kinetic_energy(self, q, dq, base_velocity=None): ...
+
+    @abc.abstractmethod
+    def potential_energy(self, q): ...
+
+    @abc.abstractmethod
+    def contact_point(self, q): ...
+
+    @abc.abstractmethod
+    def guard(self, q): ...
+
+    @abc.abstractmethod
+    def relabel(self, q, dq): ...
+
+    @abc.abstractmethod
+    def fallen(self, q): ...
+
+    @property
+    @abc.abstractmethod
+    def slope_normal(self): ...
+
+    @property
+    @abc.abstractmethod
+    def time_scale(self): ...
+
+    # ---- derived quantities (generic) -------------------------------------------------
+    def mass_matrix(self, q):
+        return mech.mass_matrix(self, q)
+
+    def coriolis_matrix(self, q, dq):
+        return mech.coriolis_matrix(self, q, dq)
+
+    def gravity_vector(self, q):
+        return mech.gravity_vector(self, q)
+
+    def acceleration(self, q, dq, generalized_force=None):
+        return mech.acceleration(self, q, dq, generalized_force)
+
+    def energy(self, x):
+        n = self.n_dof
+        return mech.energy(self, x[:n], x[n:])
+
+    def vector_field(self, t, x, args=None):
+        """$\\dot x = (\\dot q, \\ddot q)$ with diffrax's `(t, y, args)` signature."""
+        del t, args
+        n = self.n_dof
+        q, dq = x[:n], x[n:]
+        return jnp.concatenate([dq, self.acceleration(q, dq)])
+
+    def impact(self, x_minus):
+        """Reset map: augmented impact (thesis 3.27) followed by relabelling (3.32).
+
+        **Returns:** `(x_plus, impulse, physical)` where `impulse` is the contact impulse
+        on the new stance foot (world frame) and `physical` says that it pushes the foot
+        away from the ground (no pulling impulse).
+        """
+        n = self.n_dof
+        q, dq = x_minus[:n], x_minus[n:]
+        dq_plus, _, impulse = mech.augmented_impact(self, q, dq)
+        q_new, dq_new = self.relabel(q, dq_plus)
+        physical = jnp.dot(impulse, self.slope_normal) > 0
+        return jnp.concatenate([q_new, dq_new]), impulse, physical

@@ -1,0 +1,52 @@
+"""Result codes carried by every returned pytree (diffrax/optimistix style)."""
+
+import equinox as eqx
+
+
+class RESULTS(eqx.Enumeration):
+    """What happened to a computation, per batch member.
+
+    Use `RESULTS.where(pred, a, b)` under `jit`, `result == RESULTS.successful` to test,
+    and `RESULTS[result]` (outside `jit`) for the message.
+    """
+
+    successful = ""
+    no_impact = "No heel strike before the time limit."
+    fell = "The walker fell: hip reached the ground or a leg left its range."
+    bad_impact = (
+        "Impact is not physical: the contact impulse would pull the new stance foot "
+        "into the ground."
+    )
+    nonfinite = "A non-finite state or parameter was encountered."
+    max_steps_reached = "The ODE solver hit `max_steps` before the step ended."
+    not_converged = "The gait search did not converge."
+    no_real_root = "No real root of the energy quadratic for d (thesis 5.13)."
+    singular_phi_ode = (
+        "The phi'' ODE is singular along the arc (kinetic term or determinant vanishes)."
+    )
+    infeasible_uphill = (
+        "Solution of Problem 1 with positive velocities: a negative-time (uphill) "
+        "motion, not a passive gait (thesis 7.17-7.18)."
+    )
+    bad_input = "Invalid input (non-positive mass or length, slope out of range, or NaN)."
+    other_cycle = "Settled on a different cycle (not the target gait)."
+
+
+def result_names(result) -> list[str] | str:
+    """Names of result codes (outside `jit`): `'successful'`, `'fell'`, ...
+
+    Accepts a `RESULTS` item (possibly batched) or an integer array of codes; returns a
+    string for a scalar and a (nested) list of strings for a batch.
+    """
+    import numpy as np
+
+    codes = np.asarray(result._value if hasattr(result, "_value") else result)
+    lookup = {int(item._value): name for name, item in RESULTS._name_to_item.items()}
+    if codes.ndim == 0:
+        return lookup[int(codes)]
+    return np.vectorize(lambda c: lookup[int(c)], otypes=[object])(codes).tolist()
+
+
+def result_codes(result):
+    """The integer codes of a (batched) `RESULTS` item, as an array."""
+    return result._value if hasattr(result, "_value") else result
