@@ -31,6 +31,9 @@ class CompassGait(WalkerModel):
     - `b`: leg centre of mass to foot (m), default 0.5.
     - `g`: gravity (m/s^2), default 9.81.
     - `psi`: slope angle (rad), default 3 degrees.
+    - `min_strike_angle`: inter-leg angle (rad) below which a foot-ground crossing is
+      mid-swing scuffing, not a heel strike (the thesis ignores scuffing, 3.2); default
+      0.1 rad. Steps of the gaits studied here are 0.3-0.6 rad.
     """
 
     m1: float | jax.Array = 5.0
@@ -40,6 +43,7 @@ class CompassGait(WalkerModel):
     b: float | jax.Array = 0.5
     g: float | jax.Array = 9.81
     psi: float | jax.Array = math.radians(3.0)
+    min_strike_angle: float | jax.Array = 0.1
 
     n_dof: ClassVar[int] = 2
 
@@ -126,18 +130,34 @@ class CompassGait(WalkerModel):
         return self.l * jnp.cos(q[0] + self.psi)
 
     def guard(self, q):
-        """Heel-strike guard, $\\max(q_1 + q_2 + 2\\psi,\\ q_1 - q_2)$.
+        """Heel-strike guard, $\\max(q_1 + q_2 + 2\\psi,\\ q_1 - q_2 + \\delta)$.
 
         Zero on the heel-strike branch of (3.31) ($q_2 = -q_1 - 2\\psi$) with the swing
-        leg ahead ($q_2 > q_1$), positive before it. It cannot fire on mid-swing scuffing
-        ($q_1 = q_2$, the other branch of (3.31)) nor at the start of a step, where it
-        equals $q_1 - q_2 > 0$. (Drake's compass gait uses the same construction.)
+        leg ahead ($q_2 > q_1 + \\delta$, $\\delta$ = `min_strike_angle`), positive before.
+        It cannot fire at the start of a step (there it equals $q_1 - q_2 + \\delta > 0$)
+        nor on mid-swing scuffing ($q_1 = q_2$, the other branch of (3.31)), where the
+        swing foot of equal-length legs dips through the slope and comes back out a few
+        hundredths of a radian later. (Drake's compass gait uses the same construction
+        with $\\delta = 0$, which fires on the scuffing of e.g. the unstable 3-degree gait.)
         """
-        return jnp.maximum(q[0] + q[1] + 2 * self.psi, q[0] - q[1])
+        return jnp.maximum(q[0] + q[1] + 2 * self.psi, q[0] - q[1] + self.min_strike_angle)
 
     def relabel(self, q, dq):
         """Swap stance and swing legs (thesis 3.32)."""
         return q[::-1], dq[::-1]
+
+    # ---- Poincare section at the start of a step ---------------------------------------------
+    def section_to_state(self, z):
+        """Post-impact state from section coordinates $z = (q_1, \dot q_1, \dot q_2)$.
+
+        Just after impact $q_2 = -q_1 - 2\psi$ (relabelled heel-strike branch of 3.31,
+        thesis 5.5-5.6: $e = c = -a - 2\psi$).
+        """
+        return jnp.stack([z[0], -z[0] - 2 * self.psi, z[1], z[2]])
+
+    def state_to_section(self, x):
+        """Section coordinates $(q_1, \dot q_1, \dot q_2)$ of a post-impact state."""
+        return jnp.stack([x[0], x[2], x[3]])
 
     def fallen(self, q):
         """Hip on the ground, or legs folded past each other by more than half a turn."""

@@ -52,6 +52,14 @@ class WalkerModel(eqx.Module):
     @abc.abstractmethod
     def fallen(self, q): ...
 
+    @abc.abstractmethod
+    def section_to_state(self, z):
+        """Post-impact state from coordinates `z` (length 2n-1) on the post-impact section."""
+
+    @abc.abstractmethod
+    def state_to_section(self, x):
+        """Coordinates on the post-impact section of a post-impact state `x`."""
+
     @property
     @abc.abstractmethod
     def slope_normal(self): ...

@@ -1,0 +1,151 @@
+"""Virtual holonomic constraints $q = \\Phi(\\theta) = (\\theta, \\phi(\\theta))$, derived generically.
+
+For a model with $n$ DOF, $\\theta = q_1$ and $\\phi: \\mathbb R \\to \\mathbb R^{n-1}$. With
+$\\Phi' = (1, \\phi')$, $\\Phi'' = (0, \\phi'')$ the equations of motion along the constraint
+read (thesis 2.48-2.50, 4.4-4.6)
+
+$$\\alpha(\\theta)\\ddot\\theta + \\beta(\\theta)\\dot\\theta^2 + \\gamma(\\theta) = 0, \\quad
+\\alpha = M\\Phi',\\ \\beta = M\\Phi'' + C(\\Phi, \\Phi')\\Phi',\\ \\gamma = G(\\Phi)$$
+
+($n$ equations). The energy along the constraint is (4.8, 5.10)
+$E = \\tfrac12 M_\\theta \\dot\\theta^2 + P(\\Phi)$ with $M_\\theta = \\Phi'^T M \\Phi'$, which is the
+combination of the $n$ equations with the weights $\\mu = \\Phi'$ (thesis 4.24).
+
+The ODE for $\\phi''$ (thesis 5.19) follows without any hand expansion: with
+$\\dot\\theta^2 = 2(E_0 - P(\\Phi))/M_\\theta$ (5.18), the equations of motion are linear in
+$(\\ddot\\theta, \\phi'')$:
+$$[M\\Phi' \\;\\; M_{:,2:}\\dot\\theta^2] (\\ddot\\theta, \\phi'') = -\\dot\\theta^2 C(\\Phi,\\Phi')\\Phi'
+- G(\\Phi).$$
+"""
+
+import jax
+import jax.numpy as jnp
+
+from . import _mechanics as mech
+
+
+def constraint(theta, phi, dphi):
+    """$\\Phi(\\theta)$ and $\\Phi'(\\theta)$ from $\\theta$ and $(\\phi, \\phi')$ (arrays of n-1)."""
+    theta = jnp.asarray(theta)
+    q = jnp.concatenate([theta[None], jnp.atleast_1d(phi)])
+    dq_dtheta = jnp.concatenate([jnp.ones((1,), q.dtype), jnp.atleast_1d(dphi)])
+    return q, dq_dtheta
+
+
+def velocity_product(model, q, v):
+    """$C(q, v)v$: the Coriolis/centrifugal term, quadratic in $v$ (no gravity)."""
+    return mech.bias_forces(model, q, v) - mech.gravity_vector(model, q)
+
+
+def reduced_coefficients(model, theta, phi, dphi, ddphi):
+    """$(\\alpha, \\beta, \\gamma)$ of the n reduced equations (thesis 2.50; 4.6 for n = 2).
+
+    Each is an array of length n: row i is equation i of the equations of motion with
+    the constraint substituted.
+    """
+    q, dPhi = constraint(theta, phi, dphi)
+    ddPhi = jnp.concatenate([jnp.zeros((1,), q.dtype), jnp.atleast_1d(ddphi)])
+    M = mech.mass_matrix(model, q)
+    alpha = M @ dPhi
+    beta = M @ ddPhi + velocity_product(model, q, dPhi)
+    gamma = mech.gravity_vector(model, q)
+    return alpha, beta, gamma
+
+
+def reduced_mass(model, theta, phi, dphi):
+    """$M_\\theta = \\Phi'^T M(\\Phi) \\Phi'$, so that $K = \\tfrac12 M_\\theta\\dot\\theta^2$ (4.22)."""
+    q, dPhi = constraint(theta, phi, dphi)
+    return dPhi @ mech.mass_matrix(model, q) @ dPhi
+
+
+def reduced_energy(model, theta, dtheta, phi, dphi):
+    """Energy along the constraint, thesis (5.10): $\\tfrac12 M_\\theta\\dot\\theta^2 + P(\\Phi)$."""
+    q, _ = constraint(theta, phi, dphi)
+    return 0.5 * reduced_mass(model, theta, phi, dphi) * dtheta**2 + model.potential_energy(q)
+
+
+def theta_dot_squared(model, E0, theta, phi, dphi):
+    """$\\dot\\theta^2$ from the energy relation (thesis 5.18)."""
+    q, _ = constraint(theta, phi, dphi)
+    return 2.0 * (E0 - model.potential_energy(q)) / reduced_mass(model, theta, phi, dphi)
+
+
+def phi_second_derivative(model, E0, theta, phi, dphi):
+    """$\\phi''(\\theta)$ (thesis 5.19), by solving the equations of motion.
+
+    **Returns:** `(ddphi, ddtheta, dtheta_sq, det)`: the constraint curvature (n-1), the
+    acceleration $\\ddot\\theta$, $\\dot\\theta^2$ from the energy, and the determinant of the
+    linear system (zero where the ODE is singular).
+    """
+    q, dPhi = constraint(theta, phi, dphi)
+    n = q.shape[0]
+    M = mech.mass_matrix(model, q)
+    dtheta_sq = theta_dot_squared(model, E0, theta, phi, dphi)
+    A = jnp.concatenate([(M @ dPhi)[:, None], M[:, 1:] * dtheta_sq], axis=1)
+    rhs = -dtheta_sq * velocity_product(model, q, dPhi) - mech.gravity_vector(model, q)
+    sol = jnp.linalg.solve(A, rhs)
+    del n
+    return sol[1:], sol[0], dtheta_sq, jnp.linalg.det(A)
+
+
+def phi_vector_field(theta, y, args):
+    """diffrax vector field in the time-like variable $\\theta$: `y = (phi, dphi)`.
+
+    `args = (model, E0)`. Thesis (5.19) for n = 2.
+    """
+    model, E0 = args
+    k = y.shape[0] // 2
+    phi, dphi = y[:k], y[k:]
+    ddphi, _, _, _ = phi_second_derivative(model, E0, theta, phi, dphi)
+    return jnp.concatenate([dphi, ddphi])
+
+
+def theta_dynamics_coefficients(model, theta, phi, dphi):
+    """Scalar reduced dynamics $\\alpha_0\\ddot\\theta + \\beta_0\\dot\\theta^2 + \\gamma_0 = 0$ free of $\\phi''$.
+
+    Weights $w = e_1^T M(\\Phi)^{-1}$ eliminate $\\phi''$ (for n = 2 they are the thesis
+    weights (6.9) divided by $\\det M$, which gives (6.11) divided by $\\alpha_0 = \\det M$):
+    $\\alpha_0 = 1$, $\\beta_0 = w\\,C(\\Phi,\\Phi')\\Phi'$, $\\gamma_0 = w\\,G(\\Phi)$.
+    """
+    q, dPhi = constraint(theta, phi, dphi)
+    M = mech.mass_matrix(model, q)
+    w = jnp.linalg.solve(M.T, jnp.eye(q.shape[0], dtype=q.dtype)[0])
+    beta0 = w @ velocity_product(model, q, dPhi)
+    gamma0 = w @ mech.gravity_vector(model, q)
+    return jnp.ones_like(beta0), beta0, gamma0
+
+
+def integral_I(alpha_beta_gamma, theta, dtheta, theta0, dtheta0, num=64):
+    """The integral function $I(\\theta, \\dot\\theta, \\theta_0, \\dot\\theta_0)$ of thesis (2.52)-(2.53).
+
+    `alpha_beta_gamma(s) -> (alpha, beta, gamma)` gives the scalar reduced dynamics along
+    the orbit. The nested integrals are evaluated with Gauss-Legendre quadrature of
+    order `num` on $[\\theta_0, \\theta]$ (smooth integrands), zero on solutions of the
+    reduced dynamics.
+    """
+    nodes, weights = _gauss_legendre(num)
+    half = 0.5 * (theta - theta0)
+    mid = 0.5 * (theta + theta0)
+
+    def ratio(s):
+        al, be, ga = alpha_beta_gamma(s)
+        return be / al, ga / al
+
+    # log psi(x, theta0) = -2 int_{theta0}^x beta/alpha: inner integral on a sub-grid.
+    def log_psi(x):
+        h = 0.5 * (x - theta0)
+        m = 0.5 * (x + theta0)
+        vals = jax.vmap(lambda s: ratio(s)[0])(m + h * nodes)
+        return -2.0 * h * jnp.sum(weights * vals)
+
+    s = mid + half * nodes
+    inner = jax.vmap(lambda si: jnp.exp(-log_psi(si)) * 2.0 * ratio(si)[1])(s)
+    J = half * jnp.sum(weights * inner)
+    return dtheta**2 - jnp.exp(log_psi(theta)) * (dtheta0**2 - J)
+
+
+def _gauss_legendre(num):
+    import numpy as np
+
+    x, w = np.polynomial.legendre.leggauss(num)
+    return jnp.asarray(x), jnp.asarray(w)
