@@ -148,15 +148,15 @@ class CompassGait(WalkerModel):
 
     # ---- Poincare section at the start of a step ---------------------------------------------
     def section_to_state(self, z):
-        """Post-impact state from section coordinates $z = (q_1, \dot q_1, \dot q_2)$.
+        """Post-impact state from section coordinates $z = (q_1, \\dot q_1, \\dot q_2)$.
 
-        Just after impact $q_2 = -q_1 - 2\psi$ (relabelled heel-strike branch of 3.31,
-        thesis 5.5-5.6: $e = c = -a - 2\psi$).
+        Just after impact $q_2 = -q_1 - 2\\psi$ (relabelled heel-strike branch of 3.31,
+        thesis 5.5-5.6: $e = c = -a - 2\\psi$).
         """
         return jnp.stack([z[0], -z[0] - 2 * self.psi, z[1], z[2]])
 
     def state_to_section(self, x):
-        """Section coordinates $(q_1, \dot q_1, \dot q_2)$ of a post-impact state."""
+        """Section coordinates $(q_1, \\dot q_1, \\dot q_2)$ of a post-impact state."""
         return jnp.stack([x[0], x[2], x[3]])
 
     def fallen(self, q):

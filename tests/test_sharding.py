@@ -1,0 +1,38 @@
+"""A batch spread over 4 (forced host) devices gives the same result as one device."""
+
+import os
+import subprocess
+import sys
+import textwrap
+
+SCRIPT = textwrap.dedent(
+    """
+    import jax, jax.numpy as jnp, numpy as np
+    import vhcjax as vj
+    from vhcjax._sharding import batched_map, default_mesh
+
+    assert len(jax.devices()) == 4, jax.devices()
+    x0 = jnp.array([0.2186688, -0.32338856, -1.09238359, -0.37737395])
+    slopes = jnp.deg2rad(jnp.linspace(2.0, 4.0, 6))  # 6 members: padded to 8 on 4 devices
+
+    def run(psi):
+        sim = vj.simulate(vj.CompassGait(psi=psi), x0, 3, config=vj.FAST_CONFIG)
+        return sim.steps.period, sim.steps.x_plus, sim.result._value
+
+    four = batched_map(run, slopes)
+    one = batched_map(run, slopes, mesh=default_mesh(jax.devices()[:1]))
+    for a, b in zip(four, one):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    sharding = four[0].sharding
+    print("OK", np.asarray(four[0]).shape, type(sharding).__name__)
+    """
+)
+
+
+def test_batch_sharded_over_four_cpu_devices_matches_one_device():
+    env = dict(os.environ, XLA_FLAGS="--xla_force_host_platform_device_count=4")
+    out = subprocess.run(
+        [sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=600
+    )
+    assert out.returncode == 0, out.stderr[-3000:]
+    assert "OK (6, 3)" in out.stdout
