@@ -31,9 +31,9 @@ class CompassGait(WalkerModel):
     - `b`: leg centre of mass to foot (m), default 0.5.
     - `g`: gravity (m/s^2), default 9.81.
     - `psi`: slope angle (rad), default 3 degrees.
-    - `min_strike_angle`: inter-leg angle (rad) below which a foot-ground crossing is
-      mid-swing scuffing, not a heel strike (the thesis ignores scuffing, 3.2); default
-      0.1 rad. Steps of the gaits studied here are 0.3-0.6 rad.
+    - `min_strike_angle`: how far (rad) the swing leg must be ahead of the stance leg
+      before a foot-ground crossing counts as a heel strike; default 0. Crossings before
+      that are mid-swing scuffing, which the thesis ignores (3.2).
     """
 
     m1: float | jax.Array = 5.0
@@ -43,7 +43,7 @@ class CompassGait(WalkerModel):
     b: float | jax.Array = 0.5
     g: float | jax.Array = 9.81
     psi: float | jax.Array = math.radians(3.0)
-    min_strike_angle: float | jax.Array = 0.1
+    min_strike_angle: float | jax.Array = 0.0
 
     n_dof: ClassVar[int] = 2
 
@@ -129,18 +129,20 @@ class CompassGait(WalkerModel):
         """Height of the hip above the slope, measured along the normal (m)."""
         return self.l * jnp.cos(q[0] + self.psi)
 
-    def guard(self, q):
-        """Heel-strike guard, $\\max(q_1 + q_2 + 2\\psi,\\ q_1 - q_2 + \\delta)$.
+    def strike_gate(self, q):
+        """$q_2 - q_1 - \\delta$: the swing leg is ahead of the stance leg by $\\delta$ =
+        `min_strike_angle` (default 0). Heel strikes are only looked for after this gate
+        opens, so the mid-swing scuffing of equal legs (the $q_1 = q_2$ branch of 3.31,
+        which the thesis ignores) can never be taken for a heel strike."""
+        return q[1] - q[0] - self.min_strike_angle
 
-        Zero on the heel-strike branch of (3.31) ($q_2 = -q_1 - 2\\psi$) with the swing
-        leg ahead ($q_2 > q_1 + \\delta$, $\\delta$ = `min_strike_angle`), positive before.
-        It cannot fire at the start of a step (there it equals $q_1 - q_2 + \\delta > 0$)
-        nor on mid-swing scuffing ($q_1 = q_2$, the other branch of (3.31)), where the
-        swing foot of equal-length legs dips through the slope and comes back out a few
-        hundredths of a radian later. (Drake's compass gait uses the same construction
-        with $\\delta = 0$, which fires on the scuffing of e.g. the unstable 3-degree gait.)
-        """
-        return jnp.maximum(q[0] + q[1] + 2 * self.psi, q[0] - q[1] + self.min_strike_angle)
+    def guard(self, q):
+        """Heel-strike guard $q_1 + q_2 + 2\\psi$: zero on the heel-strike branch of (3.31)
+        ($q_2 = -q_1 - 2\\psi$, thesis 5.5), positive while the swing foot is above the
+        slope with the swing leg ahead; heel strike is its downward crossing after the
+        `strike_gate` has opened. (With the swing leg ahead the foot height above the
+        slope is $2l\\sin(\\tfrac{q_1+q_2+2\\psi}{2})\\sin(\\tfrac{q_2-q_1}{2})/\\cos\\psi$.)"""
+        return q[0] + q[1] + 2 * self.psi
 
     def relabel(self, q, dq):
         """Swap stance and swing legs (thesis 3.32)."""

@@ -61,19 +61,30 @@ class StepResult(eqx.Module):
     result: RESULTS
 
 
-def _event(model):
+def _event(model, gate=False):
+    """Heel-strike event (real, root-found, downward crossing of `model.guard`), or the
+    strike gate (upward crossing of `model.strike_gate`) when `gate=True`; plus a
+    boolean fall event."""
+
     def strike(t, y, args, **kwargs):
-        return model.guard(y[: model.n_dof])
+        q = y[: model.n_dof]
+        return model.strike_gate(q) if gate else model.guard(q)
 
     def fall(t, y, args, **kwargs):
         return model.fallen(y[: model.n_dof]) | ~jnp.all(jnp.isfinite(y))
 
     root_finder = optx.Newton(rtol=1e-13, atol=1e-13)
-    return diffrax.Event(cond_fn=(strike, fall), root_finder=root_finder, direction=(False, None))
+    return diffrax.Event(
+        cond_fn=(strike, fall), root_finder=root_finder, direction=(True if gate else False, None)
+    )
 
 
-def flow(model, x0, t1, config=DEFAULT_CONFIG, *, saveat=None, event=True, adjoint=None, vector_field=None):
-    """Integrate the swing dynamics from `x0` over `[0, t1]`, stopping at heel strike.
+def flow(
+    model, x0, t1, config=DEFAULT_CONFIG, *, saveat=None, event=True, adjoint=None,
+    vector_field=None, gate=False, t0=0.0,
+):
+    """Integrate the swing dynamics from `x0` over `[t0, t1]`, stopping at heel strike
+    (or, with `gate=True`, where the strike gate opens).
 
     Low-level building block (also used for pushes and dense output). Returns the diffrax
     `Solution`.
@@ -82,13 +93,13 @@ def flow(model, x0, t1, config=DEFAULT_CONFIG, *, saveat=None, event=True, adjoi
     return diffrax.diffeqsolve(
         diffrax.ODETerm(vf),
         _solver(config.solver),
-        t0=0.0,
+        t0=t0,
         t1=t1,
         dt0=None,
         y0=x0,
         stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
         saveat=diffrax.SaveAt(t1=True) if saveat is None else saveat,
-        event=_event(model) if event else None,
+        event=_event(model, gate) if event else None,
         max_steps=config.max_steps,
         adjoint=diffrax.ForwardMode() if adjoint is None else adjoint,
         throw=False,
@@ -116,17 +127,34 @@ def _classify_solve(sol):
     return code
 
 
+def _swing(model, x0, t_max, alive, config, adjoint, vector_field):
+    """Swing phase to heel strike. Models with a `strike_gate` (e.g. the compass gait,
+    whose equal legs scuff through the slope mid-swing) are integrated in two stages:
+    first until the gate opens (swing leg ahead), then until the guard crosses zero
+    downward; a strike is only possible in the second stage."""
+    t1 = jnp.where(alive, t_max, 1e-9 * t_max)
+    kw = dict(adjoint=adjoint, vector_field=vector_field)
+    if model.strike_gate(x0[: model.n_dof]) is None:
+        sol = flow(model, x0, t1, config, **kw)
+        return sol.ys[-1], sol.ts[-1], _classify_solve(sol)
+    sol1 = flow(model, x0, t1, config, gate=True, **kw)
+    code1 = _classify_solve(sol1)
+    opened = code1 == RESULTS.successful
+    t_gate = sol1.ts[-1]
+    t1b = jnp.where(opened, t1, t_gate + 1e-9 * t_max)
+    sol2 = flow(model, sol1.ys[-1], t1b, config, t0=t_gate, **kw)
+    code = RESULTS.where(opened, _classify_solve(sol2), code1)
+    x_minus = jnp.where(opened, sol2.ys[-1], sol1.ys[-1])
+    return x_minus, jnp.where(opened, sol2.ts[-1], t_gate), code
+
+
 def _step(model, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None, vector_field=None):
     """One step without error raising; `alive=False` members finish at once."""
     finite0 = jnp.all(jnp.isfinite(x0))
     alive = jnp.asarray(alive) & finite0
     x_safe = jnp.where(finite0, x0, jnp.zeros_like(x0))
     t_max = config.t_max_factor * model.time_scale
-    t1 = jnp.where(alive, t_max, 1e-9 * t_max)
-    sol = flow(model, x_safe, t1, config, adjoint=adjoint, vector_field=vector_field)
-    x_minus = sol.ys[-1]
-    period = sol.ts[-1]
-    code = _classify_solve(sol)
+    x_minus, period, code = _swing(model, x_safe, t_max, alive, config, adjoint, vector_field)
     x_plus, impulse, physical = model.impact(x_minus)
     finite = jnp.all(jnp.isfinite(x_plus)) & jnp.all(jnp.isfinite(impulse))
     code = RESULTS.where(

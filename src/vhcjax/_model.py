@@ -49,6 +49,11 @@ class WalkerModel(eqx.Module):
     @abc.abstractmethod
     def relabel(self, q, dq): ...
 
+    def strike_gate(self, q):
+        """Optional: a function crossing zero *upward* when a heel strike becomes possible
+        (the swing leg has passed the stance leg). `None` (the default) means no gate."""
+        return None
+
     @abc.abstractmethod
     def fallen(self, q): ...
 
