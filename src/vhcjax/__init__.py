@@ -34,3 +34,12 @@ try:
     __version__ = importlib.metadata.version("vhcjax")
 except importlib.metadata.PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0"
+
+# ---- multi-domain hybrid systems and the passive kneed walker (issue 6) ----
+from ._kneed_walker import KneedWalker as KneedWalker
+from ._multidomain import (
+    DomainInfo as DomainInfo,
+    MultiDomainModel as MultiDomainModel,
+    multidomain_step as multidomain_step,
+    multidomain_trajectory as multidomain_trajectory,
+)

@@ -150,6 +150,8 @@ def _swing(model, x0, t_max, alive, config, adjoint, vector_field):
 
 def _step(model, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None, vector_field=None):
     """One step without error raising; `alive=False` members finish at once."""
+    if hasattr(model, "hybrid_step"):  # multi-domain models (`_multidomain`) run a cycle
+        return model.hybrid_step(x0, config, alive, adjoint, vector_field)
     finite0 = jnp.all(jnp.isfinite(x0))
     alive = jnp.asarray(alive) & finite0
     x_safe = jnp.where(finite0, x0, jnp.zeros_like(x0))
