@@ -1,0 +1,424 @@
+"""Stability of gaits: multipliers two ways, period doubling, period-k gaits, bifurcations.
+
+- `gait_multipliers`: Floquet multipliers of a period-1 gait by the transverse
+  linearization (thesis ch. 6, `vhcjax._transverse`) and, independently, as the
+  eigenvalues of the Poincare-map Jacobian by forward-mode autodiff through the
+  heel-strike events (`vhcjax._poincare.jacobian`). Batched over slopes by `vmap`
+  (`family_multipliers`).
+- `midswing_multipliers`: the same multipliers on another Poincare section
+  ($q_1 = 0$ in mid-swing), a check that they do not depend on the section.
+- `period1_family`: the period-1 gaits over a range of slopes (continuation).
+- `period_doubling_slope`: where a multiplier of the stable family crosses $-1$
+  (secant/bisection on $\\det(I + J)$, which changes sign there).
+- `period_k_orbit`: fixed points of $P^k$ (k = 2, 4) with their multipliers.
+- `bifurcation_diagram`: Goswami et al. (1998) style: long batched simulations from
+  the period-1 gait, step periods of the last steps against slope, falls marked.
+"""
+
+import math
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from ._compass_gait import CompassGait
+from ._hybrid import DEFAULT_CONFIG, FAST_CONFIG, _solver, _step, simulate
+from ._poincare import fixed_point, jacobian, step_map
+from ._results import RESULTS
+from ._transverse import transverse_linearization
+
+#: Stable and unstable period-1 gaits of the default compass gait at 3 degrees
+#: (section coordinates $(q_1, \dot q_1, \dot q_2)$), seeds for the continuation.
+SEEDS_3DEG = {
+    "stable": (0.2186688, -1.09238359, -0.37737395),
+    "unstable": (0.20467554, -1.21057184, -0.71248882),
+}
+
+
+def with_slope(model, psi):
+    """`model` with its slope replaced by `psi` (rad), as a JAX leaf (no recompiles)."""
+    return eqx.tree_at(lambda m: m.psi, model, jnp.asarray(psi, float))
+
+
+def _sort(ev):
+    return ev[jnp.argsort(-jnp.abs(ev))]
+
+
+# ---- multipliers of one gait, two ways --------------------------------------------------
+class GaitMultipliers(eqx.Module):
+    """Multipliers of a period-1 gait.
+
+    - `transverse`: eigenvalues of $\\Xi$ (thesis 6.42), complex (2n-1,), by modulus.
+    - `poincare`: eigenvalues of the Poincare-map Jacobian (jacfwd through the events).
+    - `max_abs`: the largest modulus (transverse linearization).
+    - `stable`: `max_abs < 1`.
+    - `period`, `x_minus`: from the hybrid step.
+    - `result`: `successful` or the first failure of the step / the linearization.
+    """
+
+    transverse: jax.Array
+    poincare: jax.Array
+    max_abs: jax.Array
+    stable: jax.Array
+    period: jax.Array
+    x_minus: jax.Array
+    result: RESULTS
+
+
+def gait_multipliers(model, z, config=DEFAULT_CONFIG):
+    """Both multiplier computations at the period-1 gait with section coordinates `z`."""
+    z = jnp.asarray(z, float)
+    x0 = model.section_to_state(z)
+    sr = _step(model, x0, config)
+    tl = transverse_linearization(model, x0, sr.x_minus, sr.period)
+    pm = _sort(jnp.linalg.eigvals(jacobian(model, z, 1, config)))
+    code = RESULTS.where(sr.result == RESULTS.successful, tl.result, sr.result)
+    mx = jnp.max(jnp.abs(tl.multipliers))
+    return GaitMultipliers(tl.multipliers, pm, mx, mx < 1.0, sr.period, sr.x_minus, code)
+
+
+gait_multipliers_jit = eqx.filter_jit(gait_multipliers)
+
+
+@eqx.filter_jit
+def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG):
+    """`gait_multipliers` for many slopes in one batched (`vmap`) call.
+
+    `psis` (B,) in rad, `zs` (B, 2n-1) the gaits there. Returns a batched
+    `GaitMultipliers`.
+    """
+    return jax.vmap(lambda p, z: gait_multipliers(with_slope(model, p), z, config))(psis, zs)
+
+
+def finite_difference_jacobian(model, z, k=1, h=1e-6, config=DEFAULT_CONFIG):
+    """Central finite differences of $P^k$: an autodiff-free check of `jacobian`."""
+    z = jnp.asarray(z, float)
+    eye = jnp.eye(z.shape[0], dtype=z.dtype)
+
+    def col(e):
+        return (step_map(model, z + h * e, k, config).z_next
+                - step_map(model, z - h * e, k, config).z_next) / (2 * h)
+
+    return jax.vmap(col, out_axes=1)(eye)
+
+
+finite_difference_jacobian_jit = eqx.filter_jit(finite_difference_jacobian)
+
+
+# ---- a second Poincare section: q1 = 0 in mid-swing -------------------------------------
+def _gated_strike_event(model):
+    """Heel strike (downward guard crossing) once the strike gate is open, in one stage
+    (the flow may start with the gate already open)."""
+
+    def cond(t, y, args, **kwargs):
+        q = y[: model.n_dof]
+        return jnp.where(model.strike_gate(q) > 0, model.guard(q), 1.0 + jnp.abs(model.guard(q)))
+
+    return diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13),
+                         direction=False)
+
+
+def _midswing_event():
+    def cond(t, y, args, **kwargs):
+        return y[0]
+
+    return diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13),
+                         direction=False)
+
+
+def _flow_event(model, x0, event, config):
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(model.vector_field), _solver(config.solver), t0=0.0,
+        t1=config.t_max_factor * model.time_scale, dt0=None, y0=x0,
+        stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
+        event=event, max_steps=config.max_steps, adjoint=diffrax.ForwardMode(), throw=False,
+    )
+    ok = sol.result == diffrax.RESULTS.event_occurred
+    return sol.ys[-1], sol.ts[-1], ok
+
+
+def midswing_map(model, w, config=DEFAULT_CONFIG):
+    """Return map on the mid-swing section $\\{q_1 = 0, \\dot q_1 < 0\\}$ of a compass-gait
+    walker, coordinates $w = (q_2, \\dot q_1, \\dot q_2)$: swing to heel strike, impact,
+    swing to the next $q_1 = 0$. **Returns:** `(w_next, ok)`."""
+    x = jnp.concatenate([jnp.zeros(1, w.dtype), w])
+    xm, _, ok1 = _flow_event(model, x, _gated_strike_event(model), config)
+    xp, _, _ = model.impact(xm)
+    xs, _, ok2 = _flow_event(model, xp, _midswing_event(), config)
+    return xs[1:], ok1 & ok2
+
+
+def to_midswing(model, z, config=DEFAULT_CONFIG):
+    """Section coordinates on the mid-swing section of the orbit through post-impact `z`."""
+    xs, _, ok = _flow_event(model, model.section_to_state(z), _midswing_event(), config)
+    return xs[1:], ok
+
+
+@eqx.filter_jit
+def midswing_multipliers(model, z, config=DEFAULT_CONFIG):
+    """Multipliers of the gait through post-impact `z`, computed on the mid-swing section
+    $q_1 = 0$ (jacfwd of `midswing_map`). **Returns:** `(multipliers, w, ok)`."""
+    w, ok0 = to_midswing(model, z, config)
+    J = jax.jacfwd(lambda ww: midswing_map(model, ww, config)[0])(w)
+    _, ok = midswing_map(model, w, config)
+    return _sort(jnp.linalg.eigvals(J)), w, ok0 & ok
+
+
+# ---- the period-1 family over slopes ----------------------------------------------------
+_fixed_point_jit = eqx.filter_jit(fixed_point)
+
+
+@eqx.filter_jit
+def _fixed_points_batch(model, psis, z0s, k=1, config=DEFAULT_CONFIG):
+    return jax.vmap(lambda p, z: fixed_point(with_slope(model, p), z, k, config=config))(
+        psis, z0s)
+
+
+class Family(eqx.Module):
+    """Period-1 gaits along a slope range: `psi` (rad), `z` (B, 2n-1), `periods` (B,),
+    `result` (per slope)."""
+
+    psi: jax.Array
+    z: jax.Array
+    periods: jax.Array
+    result: RESULTS
+
+
+def period1_family(psis, family="stable", *, model=None, seed=None, seed_psi=math.radians(3.0),
+                   coarse_step=math.radians(0.1), config=DEFAULT_CONFIG):
+    """Period-1 gaits at the slopes `psis` (rad), continued from a seed.
+
+    A sequential continuation with a secant predictor on a coarse slope grid (step
+    `coarse_step`) from `seed` at `seed_psi` (default: the 3-degree gait of `family`)
+    provides initial guesses; then one batched (`vmap`) Newton solve at all `psis`.
+    Not jittable as a whole (host loop over the coarse grid); each solve is.
+    """
+    model = CompassGait() if model is None else model
+    psis = np.atleast_1d(np.asarray(psis, float))
+    z_seed = np.asarray(SEEDS_3DEG[family] if seed is None else seed, float)
+    lo, hi = min(psis.min(), seed_psi), max(psis.max(), seed_psi)
+    grid_up = np.arange(seed_psi, hi + coarse_step, coarse_step)
+    grid_dn = np.arange(seed_psi, lo - coarse_step, -coarse_step)
+    known = {}
+    for grid in (grid_up, grid_dn):
+        zs = []
+        for p in grid:
+            guess = z_seed if len(zs) == 0 else (zs[-1] if len(zs) == 1 else 2 * zs[-1] - zs[-2])
+            fp = _fixed_point_jit(with_slope(model, p), jnp.asarray(guess), 1, config=config)
+            if fp.result != RESULTS.successful:
+                break
+            zs.append(np.asarray(fp.z))
+            known[float(p)] = zs[-1]
+    ps = np.array(sorted(known))
+    Z = np.stack([known[p] for p in ps])
+    guesses = np.stack([np.interp(psis, ps, Z[:, j]) for j in range(Z.shape[1])], axis=1)
+    fps = _fixed_points_batch(model, jnp.asarray(psis), jnp.asarray(guesses), 1, config)
+    # Outside the continued range the guess is an extrapolation: flag as not converged.
+    inside = (psis >= ps.min() - 1e-12) & (psis <= ps.max() + 1e-12)
+    code = jax.vmap(lambda i, r: RESULTS.where(i, r, RESULTS.not_converged))(
+        jnp.asarray(inside), fps.result)
+    return Family(jnp.asarray(psis), fps.z, fps.periods[:, 0], code)
+
+
+# ---- period doubling --------------------------------------------------------------------
+def _flip_function(model, psi, z0, config):
+    fp = _fixed_point_jit(with_slope(model, psi), jnp.asarray(z0), 1, config=config)
+    J = _jacobian_jit(with_slope(model, psi), fp.z, 1, config)
+    return float(jnp.linalg.det(jnp.eye(J.shape[0]) + J)), np.asarray(fp.z), fp.result
+
+
+_jacobian_jit = eqx.filter_jit(jacobian)
+
+
+class PeriodDoubling(eqx.Module):
+    """A flip bifurcation: `psi` (rad), `z` (the period-1 gait there), `multipliers`
+    (Poincare, at `psi`; one of them is $-1$), `bracket` (rad), `iterations`."""
+
+    psi: float
+    z: np.ndarray
+    multipliers: np.ndarray
+    bracket: tuple
+    iterations: int
+
+
+def period_doubling_slope(psi_lo, psi_hi, z_lo, *, model=None, k=1, tol=math.radians(1e-5),
+                          config=DEFAULT_CONFIG, max_iter=60):
+    """Slope in `[psi_lo, psi_hi]` where a multiplier of the period-`k` gait crosses $-1$.
+
+    $f(\\psi) = \\det(I + J(\\psi))$ ($J$ the Jacobian of $P^k$ at the fixed point) is
+    smooth and changes sign where a real multiplier crosses $-1$; the root is found by
+    bisection safeguarded regula falsi (Illinois) to `tol` (default 1e-5 degrees),
+    continuing the fixed point from `z_lo` (a gait at `psi_lo`).
+    """
+    model = CompassGait() if model is None else model
+    if k != 1:
+        raise NotImplementedError("period_doubling_slope: k = 1 only")
+    fa, za, _ = _flip_function(model, psi_lo, z_lo, config)
+    fb, zb, _ = _flip_function(model, psi_hi, za, config)
+    if not fa * fb < 0:
+        raise ValueError(f"no sign change of det(I+J) in [{psi_lo}, {psi_hi}]: {fa}, {fb}")
+    a, b = psi_lo, psi_hi
+    side = 0
+    it = 0
+    while b - a > tol and it < max_iter:
+        c = (a * fb - b * fa) / (fb - fa)
+        if not (a < c < b) or it % 3 == 2:
+            c = 0.5 * (a + b)
+        zc_guess = za + (zb - za) * (c - a) / (b - a)
+        fc, zc, res = _flip_function(model, c, zc_guess, config)
+        if fc * fb < 0:
+            a, fa, za = b, fb, zb
+            b, fb, zb = c, fc, zc
+            side = 0
+        else:
+            b, fb, zb = c, fc, zc
+            if side == 1:
+                fa *= 0.5
+            side = 1
+        if a > b:
+            a, b, fa, fb, za, zb = b, a, fb, fa, zb, za
+        it += 1
+    psi = 0.5 * (a + b)
+    _, z, _ = _flip_function(model, psi, za, config)
+    J = _jacobian_jit(with_slope(model, psi), jnp.asarray(z), 1, config)
+    ev = np.asarray(_sort(jnp.linalg.eigvals(J)))
+    return PeriodDoubling(psi, z, ev, (a, b), it)
+
+
+# ---- period-k orbits ---------------------------------------------------------------------
+class PeriodKOrbit(eqx.Module):
+    """A fixed point of $P^k$: `z` (its first point), `orbit` (k, 2n-1) the k points,
+    `periods` (k,), `multipliers` of $P^k$ (Poincare, and by finite differences),
+    `residual`, `result`, `minimal_period` (the smallest j with $P^j(z) = z$)."""
+
+    z: np.ndarray
+    orbit: np.ndarray
+    periods: np.ndarray
+    multipliers: np.ndarray
+    multipliers_fd: np.ndarray
+    residual: float
+    result: RESULTS
+    minimal_period: int
+
+
+def settle(model, z0, num_steps=400, config=FAST_CONFIG):
+    """Post-impact section coordinates after `num_steps` steps from `z0` (None if the
+    walker fell): a seed for period-k searches on an attractor."""
+    sim = _simulate_jit(model, model.section_to_state(jnp.asarray(z0, float)), num_steps,
+                        config=config)
+    if sim.result != RESULTS.successful:
+        return None
+    return np.asarray(model.state_to_section(sim.steps.x_plus[-1]))
+
+
+_simulate_jit = eqx.filter_jit(simulate)
+
+
+def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG):
+    """Newton on $P^k(z) = z$ from `z0` (e.g. from `settle`), with multipliers of $P^k$
+    by autodiff and by central finite differences."""
+    fp = _fixed_point_jit(model, jnp.asarray(z0, float), k, config=config)
+    z = np.asarray(fp.z)
+    orbit = [z]
+    zz = jnp.asarray(z)
+    for _ in range(k - 1):
+        zz = _step_map_jit(model, zz, 1, config).z_next
+        orbit.append(np.asarray(zz))
+    orbit = np.stack(orbit)
+    J = _jacobian_jit(model, fp.z, k, config)
+    Jfd = finite_difference_jacobian_jit(model, fp.z, k, 1e-6, config)
+    minimal = k
+    for j in range(1, k):
+        if k % j == 0 and np.max(np.abs(orbit[j] - orbit[0])) < 1e-7:
+            minimal = j
+            break
+    return PeriodKOrbit(z, orbit, np.asarray(fp.periods), np.asarray(_sort(jnp.linalg.eigvals(J))),
+                        np.asarray(_sort(jnp.linalg.eigvals(Jfd))), float(fp.residual), fp.result,
+                        minimal)
+
+
+_step_map_jit = eqx.filter_jit(step_map)
+
+
+# ---- bifurcation diagram ---------------------------------------------------------------
+class BifurcationDiagram(eqx.Module):
+    """Long simulations over slopes.
+
+    - `psi` (B,): slopes (rad).
+    - `periods` (B, num_record): step periods of the last `num_record` steps (NaN-free;
+      zero after a fall).
+    - `fell` (B,): the walker did not complete all steps.
+    - `result` (B,): first failure code per slope.
+    - `num_distinct` (B,): number of distinct step periods among the recorded ones
+      (1e-6 s resolution; -1 where it fell): 1 = period 1, 2 = period 2, ...
+    """
+
+    psi: np.ndarray
+    periods: np.ndarray
+    fell: np.ndarray
+    result: np.ndarray
+    num_distinct: np.ndarray
+
+
+@eqx.filter_jit
+def _long_runs(model, psis, x0s, num_steps, num_record, config):
+    def one(p, x0):
+        sim = simulate(with_slope(model, p), x0, num_steps, config=config)
+        return sim.steps.period[-num_record:], sim.result
+
+    return jax.vmap(one)(psis, x0s)
+
+
+def count_distinct(periods, tol=1e-6):
+    """Number of distinct values in `periods` (clusters closer than `tol`)."""
+    p = np.sort(np.asarray(periods))
+    return int(1 + np.sum(np.diff(p) > tol))
+
+
+def bifurcation_diagram(psis, zs, *, model=None, num_transient=300, num_record=64,
+                        perturbation=1e-4, config=FAST_CONFIG, chunk=None):
+    """Simulate from the period-1 gaits `zs` at slopes `psis` (rad) for
+    `num_transient + num_record` steps (batched with `vmap`) and keep the step periods
+    of the last `num_record`.
+
+    The start is the gait plus `perturbation` on $\\dot q_2$, so that unstable period-1
+    gaits (past the flip) leave towards the attractor. Default tolerance: `FAST_CONFIG`
+    (rtol = atol = 1e-8). `chunk`: optional batch size (memory).
+    """
+    model = CompassGait() if model is None else model
+    psis = np.asarray(psis, float)
+    zs = np.asarray(zs, float)
+    x0s = np.stack([np.asarray(with_slope(model, p).section_to_state(jnp.asarray(z)))
+                    for p, z in zip(psis, zs)])
+    x0s[:, -1] += perturbation
+    n = len(psis)
+    chunk = n if chunk is None else chunk
+    P, R = [], []
+    for i in range(0, n, chunk):
+        sl = slice(i, min(i + chunk, n))
+        p, r = _long_runs(model, jnp.asarray(psis[sl]), jnp.asarray(x0s[sl]),
+                          num_transient + num_record, num_record, config)
+        P.append(np.asarray(p))
+        R.append(np.asarray(r._value))
+    periods = np.concatenate(P)
+    codes = np.concatenate(R)
+    fell = codes != int(RESULTS.successful._value)
+    nd = np.array([-1 if f else count_distinct(pp) for pp, f in zip(periods, fell)])
+    return BifurcationDiagram(psis, periods, fell, codes, nd)
+
+
+def period_doubling_slopes_from_diagram(diagram):
+    """Slopes (rad) where the number of distinct recorded periods first reaches 2, 4,
+    8, ... (midpoints between neighbouring slopes), from a `BifurcationDiagram`; a
+    coarse, simulation-only estimate of the cascade."""
+    out = []
+    nd = diagram.num_distinct
+    target = 2
+    for i in range(1, len(nd)):
+        if nd[i] >= target and 0 < nd[i - 1] < target:
+            out.append(0.5 * (diagram.psi[i - 1] + diagram.psi[i]))
+            target *= 2
+    return out
