@@ -36,7 +36,7 @@ def random_params(n):
     ]
 
 
-def make_model(prm):
+def make_model_prm(prm):
     """A `CompassGait` with array leaves (one compilation for all parameter values)."""
     return vj.CompassGait(**{k: jnp.asarray(v, float) for k, v in prm.items()})
 
@@ -99,7 +99,7 @@ def on_guard(prm, x):
 
 @pytest.mark.parametrize("prm", random_params(4) + [{}])
 def test_M_C_G_equal_thesis_closed_forms(prm):
-    model = make_model(prm)
+    model = make_model_prm(prm)
     par = ref.Params(**prm)
     for x in random_states(5):
         q, dq = x[:2], x[2:]
@@ -118,7 +118,7 @@ def test_M_C_G_equal_thesis_closed_forms(prm):
 
 def test_thesis_parameters_p1_to_p11():
     for prm in random_params(3):
-        got = make_model(prm).parameters()
+        got = make_model_prm(prm).parameters()
         want = ref.Params(**prm).p()
         for k in range(1, 12):
             np.testing.assert_allclose(float(got[f"p{k}"]), want[k], rtol=1e-14)
@@ -135,7 +135,7 @@ def test_mdot_minus_2c_is_skew(model):
 @pytest.mark.parametrize("prm", random_params(3) + [{}])
 def test_impact_maps_agree(prm):
     """Augmented impact (3.27) == angular-momentum impact (3.17, -p9 fix) == numpy reference."""
-    model = make_model(prm)
+    model = make_model_prm(prm)
     par = ref.Params(**prm)
     for x in random_states(5):
         xm = on_guard(prm, x)
@@ -163,7 +163,7 @@ def test_impact_conserves_angular_momenta_and_impulse_is_momentum_change(prm):
     """About the new stance foot, the whole biped's angular momentum is unchanged (3.13);
     about the hip, the new swing leg's is unchanged (3.16); and the returned contact
     impulse equals the change of linear momentum (the old stance foot lifts off freely)."""
-    model = make_model(prm)
+    model = make_model_prm(prm)
     full = {"a": 0.5, "b": 0.5, "m1": 5.0, "m2": 5.0, "mH": 10.0, **prm}
     m1, m2, mH = full["m1"], full["m2"], full["mH"]
     for x in random_states(5):
