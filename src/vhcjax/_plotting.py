@@ -1,0 +1,235 @@
+"""Figures from a `Simulation`: states against time, phase portrait, step periods, and an
+animation of the walker going down the slope (thesis Figs 7.2-7.4 and 3.5).
+
+Simulate with `dense_points > 0` (e.g. `simulate(model, x0, 10, dense_points=40)`) for the
+trajectory figures and the animation. matplotlib is imported lazily, with the Agg backend
+when no backend has been chosen, so importing vhcjax never needs a display.
+"""
+
+import numpy as np
+
+
+def _plt():
+    import matplotlib
+
+    if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
+        matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def _done(fig, path):
+    if path is not None:
+        fig.savefig(path, dpi=110, bbox_inches="tight")
+        _plt().close(fig)
+    return fig
+
+
+def _completed(sim):
+    """Number of completed steps and the dense arrays restricted to them."""
+    if sim.dense_t is None:
+        raise ValueError("this figure needs a dense simulation: simulate(..., dense_points=N)")
+    k = int(sim.num_successful)
+    return k, np.asarray(sim.dense_t)[:k], np.asarray(sim.dense_x)[:k]
+
+
+def _step_starts(sim, k):
+    T = np.asarray(sim.steps.period)[:k]
+    return np.concatenate([[0.0], np.cumsum(T)])[:k]
+
+
+def plot_states(sim, axes=None, path=None):
+    """$q$ and $\\dot q$ against time (thesis Fig 7.2): stance-leg angle and velocity in
+    one colour, swing leg in another; the lines swap at each impact (relabelling), and the
+    velocities jump.
+
+    **Arguments:** `sim` (dense `Simulation`), `axes` (two matplotlib axes, optional),
+    `path` (save the figure there and close it).
+
+    **Returns:** the matplotlib figure.
+    """
+    plt = _plt()
+    k, t, x = _completed(sim)
+    if axes is None:
+        fig, axes = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+    else:
+        fig = axes[0].figure
+    starts = _step_starts(sim, k)
+    for i in range(k):
+        tt = starts[i] + t[i]
+        lab = i == 0
+        axes[0].plot(tt, x[i, :, 0], "C3", label="$q_1$ (stance)" if lab else None)
+        axes[0].plot(tt, x[i, :, 1], "C2", label="$q_2$ (swing)" if lab else None)
+        axes[1].plot(tt, x[i, :, 2], "C3", label="$\\dot q_1$ (stance)" if lab else None)
+        axes[1].plot(tt, x[i, :, 3], "C2", label="$\\dot q_2$ (swing)" if lab else None)
+    axes[0].set_ylabel("angle (rad)")
+    axes[1].set_ylabel("angular velocity (rad/s)")
+    axes[1].set_xlabel("time (s)")
+    for ax in axes:
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right", fontsize=8)
+    axes[0].set_title(f"States against time ({k} steps)")
+    return _done(fig, path)
+
+
+def plot_phase_portrait(sim, ax=None, path=None):
+    """Phase portrait of one physical leg (thesis Fig 7.3): $(q, \\dot q)$ while it is the
+    stance leg (red) and while it is the swing leg (green); impacts are the jumps.
+
+    **Returns:** the matplotlib figure.
+    """
+    plt = _plt()
+    k, _, x = _completed(sim)
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(5.5, 4.5))
+    else:
+        fig = ax.figure
+    for i in range(k):
+        stance = i % 2 == 0  # the leg that is the stance leg in step 0
+        j = 0 if stance else 1
+        ax.plot(x[i, :, j], x[i, :, j + 2], "C3" if stance else "C2",
+                label=("stance" if stance else "swing") if i < 2 else None)
+        if i + 1 < k:  # the impact: a jump in velocity at fixed angle
+            ax.plot([x[i, -1, j], x[i + 1, 0, 1 - j]], [x[i, -1, j + 2], x[i + 1, 0, 3 - j]],
+                    ":", color="0.5", lw=0.8)
+    ax.set_xlabel("leg angle (rad)")
+    ax.set_ylabel("leg angular velocity (rad/s)")
+    ax.set_title("Phase portrait of one leg")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    return _done(fig, path)
+
+
+def plot_step_periods(sim, ax=None, path=None):
+    """Time between consecutive impacts against step number (thesis Fig 7.4). Needs no
+    dense output.
+
+    **Returns:** the matplotlib figure.
+    """
+    plt = _plt()
+    k = int(sim.num_successful)
+    T = np.asarray(sim.steps.period)[:k]
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(6, 3.5))
+    else:
+        fig = ax.figure
+    ax.plot(np.arange(1, k + 1), T, "o-", ms=4)
+    ax.set_xlabel("step number")
+    ax.set_ylabel("step period (s)")
+    ax.set_title("Time between consecutive impacts")
+    ax.ticklabel_format(axis="y", useOffset=False)
+    ax.grid(alpha=0.3)
+    return _done(fig, path)
+
+
+def walker_frames(sim, model):
+    """World positions of the walker at every dense time of the completed steps.
+
+    **Returns:** dict with `t` (absolute times), `q` (angles) and 2-D positions
+    `stance_foot`, `hip`, `swing_foot`, `stance_mass`, `swing_mass` (shape `(frames, 2)`),
+    the stance foot moving to the impact point after each step.
+    """
+    import jax
+
+    k, t, x = _completed(sim)
+    n = t.shape[1]
+    q = x[..., : model.n_dof].reshape(-1, model.n_dof)
+    pts = {name: np.asarray(v) for name, v in jax.vmap(model.points)(q).items()}
+    # Stance foot of each step: the previous step's swing foot at impact.
+    feet = np.zeros((k, 2))
+    for i in range(1, k):
+        feet[i] = feet[i - 1] + pts["swing_foot"][i * n - 1]
+    base = np.repeat(feet, n, axis=0)
+    out = {name: v + base for name, v in pts.items()}
+    out["t"] = (_step_starts(sim, k)[:, None] + t).reshape(-1)
+    out["q"] = q
+    return out
+
+
+def _draw_walker(ax, frames, i, psi, l, texts):
+    """Draw frame `i` in a window of width 4 l that follows the hip."""
+    ax.clear()
+    hip_x = frames["hip"][i][0]
+    xlim = (hip_x - 2.0 * l, hip_x + 2.0 * l)
+    y0 = -np.tan(psi) * hip_x
+    ylim = (y0 - 0.6 * l, y0 + 1.4 * l)
+    xs = np.array(xlim)
+    ax.plot(xs, -np.tan(psi) * xs, color="0.3", lw=1.5)  # the slope
+    ax.fill_between(xs, -np.tan(psi) * xs, ylim[0], color="0.85")
+    # Footprints: the stance-foot positions so far.
+    prints = np.unique(frames["stance_foot"][: i + 1], axis=0)
+    ax.plot(prints[:, 0], prints[:, 1], "v", color="0.4", ms=5)
+    st, hip, sw = frames["stance_foot"][i], frames["hip"][i], frames["swing_foot"][i]
+    ax.plot([st[0], hip[0]], [st[1], hip[1]], color="C3", lw=3, solid_capstyle="round",
+            label="stance leg")
+    ax.plot([hip[0], sw[0]], [hip[1], sw[1]], color="C2", lw=3, solid_capstyle="round",
+            label="swing leg")
+    for name in ("stance_mass", "swing_mass"):
+        p = frames[name][i]
+        ax.plot(p[0], p[1], "o", color="k", ms=5)
+    ax.plot(hip[0], hip[1], "o", color="k", ms=12)
+    q = frames["q"][i]
+    ax.text(0.02, 0.95, texts.format(t=frames["t"][i], q1=q[0], q2=q[1]),
+            transform=ax.transAxes, va="top", family="monospace", fontsize=9)
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_xlim(*xlim)
+    ax.set_ylim(*ylim)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m), downhill")
+    ax.set_ylabel("y (m)")
+
+
+_TEXT = "t = {t:5.2f} s\nq1 = {q1:+.3f} rad\nq2 = {q2:+.3f} rad"
+
+
+def plot_walker(sim, model, frame=0, ax=None, path=None):
+    """One frame of the animation: slope, stance leg (red), swing leg (green), hip and
+    leg masses, time and angles.
+
+    **Returns:** the matplotlib figure.
+    """
+    plt = _plt()
+    frames = walker_frames(sim, model)
+    if ax is None:
+        fig, ax = plt.subplots(figsize=(6, 3.2))
+    else:
+        fig = ax.figure
+    _draw_walker(ax, frames, frame, float(model.psi), float(model.l), _TEXT)
+    return _done(fig, path)
+
+
+def animate(sim, model, path, *, fps=None, max_frames=300):
+    """Animation of the walker going down the slope (thesis Fig 3.5), saved as a GIF.
+
+    **Arguments:**
+
+    - `sim`: a dense `Simulation`; `model`: the model that produced it.
+    - `path`: output file (`.gif`, written with Pillow).
+    - `fps`: frames per second; default: real time (dense points per step / period).
+    - `max_frames`: frames are subsampled evenly beyond this.
+
+    **Returns:** the number of frames written.
+    """
+    plt = _plt()
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    frames = walker_frames(sim, model)
+    nframes = len(frames["t"])
+    if nframes == 0:
+        raise ValueError("no completed step to animate")
+    idx = np.unique(np.linspace(0, nframes - 1, min(nframes, max_frames)).round().astype(int))
+    if fps is None:
+        duration = frames["t"][-1] - frames["t"][0]
+        fps = max(1.0, min(50.0, len(idx) / max(duration, 1e-9)))
+    fig, ax = plt.subplots(figsize=(6, 3.2))
+    psi, l = float(model.psi), float(model.l)
+
+    def update(j):
+        _draw_walker(ax, frames, idx[j], psi, l, _TEXT)
+        return ()
+
+    anim = FuncAnimation(fig, update, frames=len(idx), blit=False)
+    anim.save(path, writer=PillowWriter(fps=fps), dpi=80)
+    plt.close(fig)
+    return len(idx)
