@@ -43,3 +43,29 @@ from ._multidomain import (
     multidomain_step as multidomain_step,
     multidomain_trajectory as multidomain_trajectory,
 )
+
+# ---- robustness: contraction, basin of attraction, slope/terrain sensitivity, pushes (issue 5) ----
+from ._basin import (
+    BasinSlice as BasinSlice,
+    BasinVolume as BasinVolume,
+    basin_slice as basin_slice,
+    basin_volume as basin_volume,
+    max_converging_perturbation as max_converging_perturbation,
+)
+from ._bisection import Threshold as Threshold, bisect_threshold as bisect_threshold
+from ._contraction import Contraction as Contraction, contraction as contraction
+from ._push import (
+    impulse_step as impulse_step,
+    max_push as max_push,
+    pulse_step as pulse_step,
+    push_sensitivity_autodiff as push_sensitivity_autodiff,
+    push_sensitivity_transverse as push_sensitivity_transverse,
+)
+from ._recovery import CONVERGED as CONVERGED, Recovery as Recovery, recover as recover
+from ._slope_sensitivity import SlopeSensitivity as SlopeSensitivity, slope_sensitivity as slope_sensitivity
+from ._terrain import (
+    FloorStepCompassGait as FloorStepCompassGait,
+    gait_sensitivity_norm as gait_sensitivity_norm,
+    max_floor_step as max_floor_step,
+    terrain_recovery as terrain_recovery,
+)

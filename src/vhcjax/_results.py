@@ -30,6 +30,7 @@ class RESULTS(eqx.Enumeration):
     )
     bad_input = "Invalid input (non-positive mass or length, slope out of range, or NaN)."
     other_cycle = "Settled on a different cycle (not the target gait)."
+    undecided = "Neither converged to the gait, nor fell, nor settled on a cycle in the step budget."
 
 
 def result_names(result) -> list[str] | str:
