@@ -69,3 +69,6 @@ from ._terrain import (
     max_floor_step as max_floor_step,
     terrain_recovery as terrain_recovery,
 )
+
+# ---- figures and animation of a simulation (issue 2); matplotlib is imported lazily ----
+from . import _plotting as plotting
