@@ -224,9 +224,9 @@ def period1_family(psis, family="stable", *, model=None, seed=None, seed_psi=mat
 
 
 # ---- period doubling --------------------------------------------------------------------
-def _flip_function(model, psi, z0, config):
-    fp = _fixed_point_jit(with_slope(model, psi), jnp.asarray(z0), 1, config=config)
-    J = _jacobian_jit(with_slope(model, psi), fp.z, 1, config)
+def _flip_function(model, psi, z0, config, k=1):
+    fp = _fixed_point_jit(with_slope(model, psi), jnp.asarray(z0), k, config=config)
+    J = _jacobian_jit(with_slope(model, psi), fp.z, k, config)
     return float(jnp.linalg.det(jnp.eye(J.shape[0]) + J)), np.asarray(fp.z), fp.result
 
 
@@ -254,10 +254,10 @@ def period_doubling_slope(psi_lo, psi_hi, z_lo, *, model=None, k=1, tol=math.rad
     continuing the fixed point from `z_lo` (a gait at `psi_lo`).
     """
     model = CompassGait() if model is None else model
-    if k != 1:
-        raise NotImplementedError("period_doubling_slope: k = 1 only")
-    fa, za, _ = _flip_function(model, psi_lo, z_lo, config)
-    fb, zb, _ = _flip_function(model, psi_hi, za, config)
+    fa, za, ra = _flip_function(model, psi_lo, z_lo, config, k)
+    fb, zb, rb = _flip_function(model, psi_hi, za, config, k)
+    if ra != RESULTS.successful or rb != RESULTS.successful:
+        raise ValueError("period_doubling_slope: no period-k gait at the bracket ends")
     if not fa * fb < 0:
         raise ValueError(f"no sign change of det(I+J) in [{psi_lo}, {psi_hi}]: {fa}, {fb}")
     a, b = psi_lo, psi_hi
@@ -268,7 +268,7 @@ def period_doubling_slope(psi_lo, psi_hi, z_lo, *, model=None, k=1, tol=math.rad
         if not (a < c < b) or it % 3 == 2:
             c = 0.5 * (a + b)
         zc_guess = za + (zb - za) * (c - a) / (b - a)
-        fc, zc, res = _flip_function(model, c, zc_guess, config)
+        fc, zc, res = _flip_function(model, c, zc_guess, config, k)
         if fc * fb < 0:
             a, fa, za = b, fb, zb
             b, fb, zb = c, fc, zc
@@ -282,8 +282,8 @@ def period_doubling_slope(psi_lo, psi_hi, z_lo, *, model=None, k=1, tol=math.rad
             a, b, fa, fb, za, zb = b, a, fb, fa, zb, za
         it += 1
     psi = 0.5 * (a + b)
-    _, z, _ = _flip_function(model, psi, za, config)
-    J = _jacobian_jit(with_slope(model, psi), jnp.asarray(z), 1, config)
+    _, z, _ = _flip_function(model, psi, za, config, k)
+    J = _jacobian_jit(with_slope(model, psi), jnp.asarray(z), k, config)
     ev = np.asarray(_sort(jnp.linalg.eigvals(J)))
     return PeriodDoubling(psi, z, ev, (a, b), it)
 
@@ -422,3 +422,64 @@ def period_doubling_slopes_from_diagram(diagram):
             out.append(0.5 * (diagram.psi[i - 1] + diagram.psi[i]))
             target *= 2
     return out
+
+
+def period2_branch(model, pd, psis, config=DEFAULT_CONFIG, amplitudes=(3e-3, 1e-2, 3e-2)):
+    """Continue the period-2 gait born at the flip `pd` (a `PeriodDoubling`) over the
+    slopes `psis` (rad, increasing, all past the flip).
+
+    The first solve starts from the period-1 gait at the flip displaced along the flip
+    eigenvector (several trial amplitudes; a solution that is the period-1 gait again is
+    rejected), then secant continuation. Stops where Newton fails or the orbit collapses.
+    **Returns:** dict with `psi` (m,), `z` (m, 3), `periods` (m, 2), `max_abs` (m,) and
+    `stable` (m,) from the multipliers of $P^2$, and `flip_psi`: the slope where a
+    multiplier of $P^2$ crosses $-1$ (period 2 -> 4), located to 1e-5 degrees, or None.
+    """
+    psis = np.asarray(psis, float)
+    if len(psis) == 0:
+        return None
+    J = _jacobian_jit(with_slope(model, pd.psi), jnp.asarray(pd.z), 1, config)
+    ev, V = np.linalg.eig(np.asarray(J))
+    v = np.real(V[:, np.argmin(np.abs(ev + 1))])
+    v = v / np.linalg.norm(v)
+    out_psi, out_z, out_T, out_mx = [], [], [], []
+    zs = []
+    for i, p in enumerate(psis):
+        m = with_slope(model, p)
+        if i == 0:
+            trials = [pd.z + s * v for s in amplitudes]
+        else:
+            trials = [zs[-1] if len(zs) == 1 else zs[-1] + (zs[-1] - zs[-2])
+                      * (p - out_psi[-1]) / (out_psi[-1] - out_psi[-2])]
+        found = None
+        for guess in trials:
+            fp = _fixed_point_jit(m, jnp.asarray(guess), 2, config=config)
+            if fp.result != RESULTS.successful:
+                continue
+            z1 = np.asarray(_step_map_jit(m, fp.z, 1, config).z_next)
+            if np.max(np.abs(z1 - np.asarray(fp.z))) > 1e-6:
+                found = fp
+                break
+        if found is None:
+            break
+        zs.append(np.asarray(found.z))
+        Jk = _jacobian_jit(m, found.z, 2, config)
+        out_psi.append(p)
+        out_z.append(zs[-1])
+        out_T.append(np.asarray(found.periods))
+        out_mx.append(float(np.max(np.abs(np.linalg.eigvals(np.asarray(Jk))))))
+    if not out_psi:
+        return None
+    mx = np.asarray(out_mx)
+    stable = mx < 1.0
+    flip = None
+    idx = np.where(stable[:-1] & ~stable[1:])[0]
+    if len(idx):
+        i = int(idx[0])
+        try:
+            flip = period_doubling_slope(out_psi[i], out_psi[i + 1], out_z[i], model=model,
+                                         k=2, config=config).psi
+        except ValueError:
+            flip = None
+    return {"psi": np.asarray(out_psi), "z": np.stack(out_z), "periods": np.stack(out_T),
+            "max_abs": mx, "stable": stable, "flip_psi": flip}

@@ -1,0 +1,134 @@
+"""Stability figures: multipliers in the complex plane (thesis Figs 7.1, 7.8, 7.15),
+multipliers against slope, and the bifurcation diagram (Goswami et al. 1998 style).
+
+matplotlib is imported lazily (Agg backend): the library does not need it otherwise.
+"""
+
+import numpy as np
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def plot_multipliers_complex(sets, labels=None, path=None, title=None):
+    """Multipliers in the complex plane with the unit circle.
+
+    `sets`: a list of complex arrays (e.g. transverse and Poincare multipliers of one
+    gait, or several gaits); `labels`: legend entries. Returns the figure; saved to
+    `path` if given.
+    """
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(5, 5))
+    t = np.linspace(0, 2 * np.pi, 400)
+    ax.plot(np.cos(t), np.sin(t), color="0.5", lw=1, label="unit circle")
+    ax.axhline(0, color="0.85", lw=0.8)
+    ax.axvline(0, color="0.85", lw=0.8)
+    markers = ["o", "x", "s", "+", "^", "v", "D"]
+    rmax = 1.0
+    for i, ev in enumerate(sets):
+        ev = np.atleast_1d(np.asarray(ev))
+        rmax = max(rmax, float(np.max(np.abs(ev))))
+        lab = None if labels is None else labels[i]
+        ax.plot(ev.real, ev.imag, markers[i % len(markers)], ms=8 if i == 0 else 10,
+                mfc="none" if i == 0 else None, label=lab)
+    lim = 1.15 * rmax
+    ax.set_xlim(-lim, lim)
+    ax.set_ylim(-lim, lim)
+    ax.set_aspect("equal")
+    ax.set_xlabel("Re $\\lambda$")
+    ax.set_ylabel("Im $\\lambda$")
+    if title:
+        ax.set_title(title)
+    ax.legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    if path:
+        fig.savefig(path, dpi=120)
+    return fig
+
+
+def plot_multipliers_vs_slope(slopes_deg, families, path=None):
+    """Moduli of the multipliers against slope.
+
+    `families`: dict name -> complex array (B, 2n-1) of multipliers at `slopes_deg`.
+    """
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    styles = {0: "-", 1: "--", 2: ":"}
+    colors = ["C0", "C3", "C2", "C1"]
+    for j, (name, ev) in enumerate(families.items()):
+        ev = np.asarray(ev)
+        for i in range(ev.shape[1]):
+            ax.plot(slopes_deg, np.abs(ev[:, i]), styles.get(i, "-"), color=colors[j % 4],
+                    label=f"{name} |$\\lambda_{i + 1}$|")
+    ax.axhline(1.0, color="k", lw=0.8)
+    ax.set_yscale("log")
+    ax.set_xlabel("slope (deg)")
+    ax.set_ylabel("|multiplier|")
+    ax.set_title("Multipliers of the period-1 gaits (transverse linearization)")
+    ax.legend(fontsize=7, ncol=2)
+    fig.tight_layout()
+    if path:
+        fig.savefig(path, dpi=120)
+    return fig
+
+
+def _branch(ax, x, y, stable, color, label):
+    """Solid where stable, dashed where unstable."""
+    x, y, stable = np.asarray(x), np.asarray(y), np.asarray(stable, bool)
+    first = {True: True, False: True}
+    for s in (True, False):
+        yy = np.where(stable == s, y, np.nan)
+        # connect across the stability change so the line is continuous
+        for i in range(1, len(x)):
+            if stable[i] != stable[i - 1] and stable[i] == s:
+                yy[i - 1] = y[i - 1]
+        ax.plot(x, yy, "-" if s else "--", color=color, lw=1.4,
+                label=f"{label} ({'stable' if s else 'unstable'})" if first[s] else None)
+        first[s] = False
+
+
+def plot_bifurcation(diagram, branches=(), path=None, flips_deg=()):
+    """Bifurcation diagram: step periods of the last recorded steps against slope.
+
+    - `diagram`: a `BifurcationDiagram`.
+    - `branches`: tuples `(label, slopes_deg, periods (B,) or (B, k), stable (B,))`
+      overlaid (solid stable, dashed unstable).
+    - `flips_deg`: slopes of period doubling, marked by thin vertical lines.
+    """
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(8, 5))
+    deg = np.degrees(np.asarray(diagram.psi))
+    P = np.asarray(diagram.periods)
+    ok = ~np.asarray(diagram.fell)
+    xs = np.repeat(deg[ok], P.shape[1])
+    ax.plot(xs, P[ok].ravel(), ",", color="k", alpha=0.6, label="simulation (last steps)")
+    ax.plot([], [], ".", color="k", label="simulation (last steps)")  # visible legend key
+    if np.any(~ok):
+        ymin = np.min(P[ok]) if np.any(ok) else 0.0
+        ax.plot(deg[~ok], np.full(np.sum(~ok), ymin - 0.01), "x", color="C3", ms=4,
+                label="fell")
+    colors = ["C0", "C2", "C1", "C4"]
+    for j, (label, sdeg, per, stable) in enumerate(branches):
+        per = np.asarray(per)
+        per = per[:, None] if per.ndim == 1 else per
+        for i in range(per.shape[1]):
+            _branch(ax, sdeg, per[:, i], stable, colors[j % 4], label if i == 0 else "_" + label)
+    for f in flips_deg:
+        ax.axvline(f, color="0.6", lw=0.6, ls=":")
+    ax.set_xlabel("slope (deg)")
+    ax.set_ylabel("step period (s)")
+    ax.set_title("Compass gait: step periods after transients (Goswami et al. 1998)")
+    handles, labels = ax.get_legend_handles_labels()
+    keep = [(h, lab) for h, lab in zip(handles, labels) if not lab.startswith("_")]
+    keep = keep[1:] if keep and keep[0][1] == "simulation (last steps)" else keep
+    ax.legend([h for h, _ in keep], [lab for _, lab in keep], fontsize=8, loc="upper left")
+    fig.tight_layout()
+    if path:
+        fig.savefig(path, dpi=130)
+    return fig
