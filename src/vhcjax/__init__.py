@@ -72,3 +72,21 @@ from ._terrain import (
 
 # ---- figures and animation of a simulation (issue 2); matplotlib is imported lazily ----
 from . import _plotting as plotting
+
+# ---- stability: transverse linearization, multipliers, period doubling (issue 4) ----
+from ._stability import (
+    BifurcationDiagram as BifurcationDiagram,
+    GaitMultipliers as GaitMultipliers,
+    bifurcation_diagram as bifurcation_diagram,
+    family_multipliers as family_multipliers,
+    gait_multipliers as gait_multipliers,
+    midswing_multipliers as midswing_multipliers,
+    period1_family as period1_family,
+    period2_branch as period2_branch,
+    period_doubling_slope as period_doubling_slope,
+    period_k_orbit as period_k_orbit,
+)
+from ._transverse import (
+    TransverseLinearization as TransverseLinearization,
+    transverse_linearization as transverse_linearization,
+)
