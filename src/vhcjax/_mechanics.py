@@ -65,12 +65,25 @@ def bias_forces(model, q, dq):
     return mdot_dq - dK_dq + gravity_vector(model, q)
 
 
+def solve_small(A, b):
+    """$A^{-1} b$; for 2x2 systems by the explicit inverse, else `jnp.linalg.solve`.
+
+    Under `vmap` on CPU a batched LU of tiny matrices costs more than the rest of the
+    vector field together; the 2x2 formula is exact to rounding for the (symmetric
+    positive definite, well-conditioned) mass matrices met here.
+    """
+    if A.shape == (2, 2) and b.shape == (2,):
+        det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+        return jnp.stack([A[1, 1] * b[0] - A[0, 1] * b[1], A[0, 0] * b[1] - A[1, 0] * b[0]]) / det
+    return jnp.linalg.solve(A, b)
+
+
 def acceleration(model, q, dq, generalized_force=None):
     """Forward dynamics $\\ddot q = M^{-1}(\\tau - C\\dot q - G)$ (thesis 3.7)."""
     rhs = -bias_forces(model, q, dq)
     if generalized_force is not None:
         rhs = rhs + generalized_force
-    return jnp.linalg.solve(mass_matrix(model, q), rhs)
+    return solve_small(mass_matrix(model, q), rhs)
 
 
 def energy(model, q, dq):
