@@ -100,7 +100,7 @@ def test_installed_entry_point_subprocess():
 @pytest.mark.slow
 def test_plots_and_animation_written(capsys, tmp_path):
     gif = tmp_path / "walker.gif"
-    code, out, err = run_cli(capsys, "--steps", "2", "--plots", str(tmp_path / "figs"),
+    code, out, err = run_cli(capsys, "--steps", "1", "--plots", str(tmp_path / "figs"),
                              "--animate", str(gif))
     assert code == 0, err
     for name in ("states.png", "phase.png", "periods.png"):
@@ -109,4 +109,4 @@ def test_plots_and_animation_written(capsys, tmp_path):
     from PIL import Image
 
     with Image.open(gif) as im:
-        assert im.n_frames == 80  # 2 steps x 40 dense points
+        assert im.n_frames == 40  # 1 step x 40 dense points
