@@ -188,7 +188,9 @@ def wilson_interval(successes, n, confidence=0.95):
     denom = 1 + zq**2 / n
     centre = (p + zq**2 / (2 * n)) / denom
     half = zq * math.sqrt(p * (1 - p) / n + zq**2 / (4 * n**2)) / denom
-    return (max(0.0, centre - half), min(1.0, centre + half))
+    lo = 0.0 if successes == 0 else max(0.0, centre - half)
+    hi = 1.0 if successes == n else min(1.0, centre + half)
+    return (lo, hi)
 
 
 class BasinVolume(eqx.Module):

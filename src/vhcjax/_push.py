@@ -78,6 +78,23 @@ def _finish(model, x_minus, period, code, x_fallback):
     return StepResult(x_minus, x_plus, period, jnp.where(ok, impulse, 0.0), code)
 
 
+def _pushed_step(model, x0, t_push, kick, config, alive):
+    """Nominal flow to `t_push`, then `kick(x) -> (x_after, t_after)`, then the rest of the
+    swing to heel strike, impact. The kick must end before the heel strike."""
+    n = model.n_dof
+    t_max = config.t_max_factor * model.time_scale
+    t_s = jnp.maximum(t_push, 1e-12)
+    alive = jnp.asarray(alive)
+    sol0 = flow(model, x0, jnp.where(alive, t_s, 1e-12), config, event=False)
+    xs = sol0.ys[-1]
+    x_k, t_k = kick(xs, t_s)
+    bad = (model.fallen(xs[:n]) | model.fallen(x_k[:n]) | ~jnp.all(jnp.isfinite(x_k)))
+    x_minus, t_end, code = _swing_from(model, x_k, jnp.where(alive, t_k, 1e-12),
+                                       jnp.where(alive, t_max, 2e-12), config)
+    code = RESULTS.where(bad, RESULTS.fell, code)
+    return _finish(model, x_minus, t_end, code, x0)
+
+
 def impulse_step(model, x0, t_push, impulse, config=DEFAULT_CONFIG, alive=True):
     """One step from the post-impact state `x0` with a hip impulse `impulse` (N s, world
     frame) at time `t_push` after the step began (before the nominal heel strike).
@@ -85,39 +102,32 @@ def impulse_step(model, x0, t_push, impulse, config=DEFAULT_CONFIG, alive=True):
     **Returns:** a `StepResult` (period measured from the start of the step).
     """
     n = model.n_dof
-    t_max = config.t_max_factor * model.time_scale
-    t_s = jnp.maximum(t_push, 1e-12)
-    alive = jnp.asarray(alive)
-    sol0 = flow(model, x0, jnp.where(alive, t_s, 1e-12), config, event=False)
-    xs = sol0.ys[-1]
-    fell0 = model.fallen(xs[:n]) | ~jnp.all(jnp.isfinite(xs))
-    dq = impulse_velocity_jump(model, xs[:n], impulse)
-    x_push = xs.at[n:].add(dq)
-    x_minus, t_end, code = _swing_from(model, x_push, jnp.where(alive, t_s, 1e-12),
-                                       jnp.where(alive, t_max, 2e-12), config)
-    code = RESULTS.where(fell0, RESULTS.fell, code)
-    return _finish(model, x_minus, t_end, code, x0)
+
+    def kick(x, t):
+        return x.at[n:].add(impulse_velocity_jump(model, x[:n], impulse)), t
+
+    return _pushed_step(model, x0, t_push, kick, config, alive)
 
 
 def pulse_step(model, x0, t_push, force, duration, config=DEFAULT_CONFIG, alive=True):
     """One step from `x0` with a hip force `force` (N, world frame) acting during
-    `[t_push, t_push + duration]`.
+    `[t_push, t_push + duration]` (integrated as its own segment, so that the adaptive
+    solver cannot step over a short pulse; the pulse must end before the heel strike).
 
     **Returns:** a `StepResult`.
     """
-    from ._hybrid import _swing
-
     n = model.n_dof
 
     def vf(t, x, args):
         q, dq = x[:n], x[n:]
-        on = (t >= t_push) & (t < t_push + duration)
-        tau = jnp.where(on, 1.0, 0.0) * (hip_jacobian(model, q).T @ force)
+        tau = hip_jacobian(model, q).T @ force
         return jnp.concatenate([dq, model.acceleration(q, dq, tau)])
 
-    t_max = config.t_max_factor * model.time_scale
-    x_minus, period, code = _swing(model, x0, t_max, jnp.asarray(alive), config, None, vf)
-    return _finish(model, x_minus, period, code, x0)
+    def kick(x, t):
+        sol = flow(model, x, t + duration, config, event=False, vector_field=vf, t0=t)
+        return sol.ys[-1], t + duration
+
+    return _pushed_step(model, x0, t_push, kick, config, alive)
 
 
 # ---- linear sensitivity, way 1: autodiff through the pushed step -------------------------

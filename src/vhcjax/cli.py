@@ -16,6 +16,7 @@ import sys
 SUBCOMMANDS = [
     "_cli_simulate",
     "_cli_bifurcation",  # bifurcation, multipliers
+    "_cli_robustness",  # contraction, basin, slope-sensitivity, push
 ]
 
 

@@ -1,0 +1,72 @@
+"""Basin of attraction: classification spot-checked by independent long simulations,
+bisection brackets verified by simulation, Wilson interval against known values."""
+
+import numpy as np
+import pytest
+
+import vhcjax as vj
+from vhcjax._basin import axis_directions, wilson_interval
+from vhcjax._recovery import CONVERGED, FELL
+
+from _robust import long_walk, returns_to, stable_gait
+
+
+@pytest.fixture(scope="module")
+def slice8():
+    model, z, _, _ = stable_gait()
+    return vj.basin_slice(model, z, axes=(0, 1), half_widths=(0.08, 0.4), shape=(8, 8),
+                          num_steps=50, chunk=64)
+
+
+def test_slice_classification_spot_checked(slice8):
+    model, z, x_star, _ = stable_gait()
+    b = slice8
+    assert b.label.shape == (8, 8)
+    conv = np.argwhere(b.label == CONVERGED)
+    fell = np.argwhere(b.label == FELL)
+    assert len(conv) >= 2 and len(fell) >= 2  # the slice straddles the basin boundary
+    assert 0 < b.fraction < 1
+    cell = (b.offsets_x[1] - b.offsets_x[0]) * (b.offsets_y[1] - b.offsets_y[0])
+    assert np.isclose(b.area, np.sum(b.label == CONVERGED) * cell)
+    rng = np.random.default_rng(0)
+    for (iy, ix), expect in [(p, True) for p in conv[rng.choice(len(conv), 2, replace=False)]] + \
+                            [(p, False) for p in fell[rng.choice(len(fell), 2, replace=False)]]:
+        zz = np.array(z, dtype=float)
+        zz[0] += b.offsets_x[ix]
+        zz[1] += b.offsets_y[iy]
+        sim = long_walk(model, model.section_to_state(zz))
+        if expect:
+            assert returns_to(sim, x_star)
+            assert 0 < b.steps[iy, ix] <= 50
+        else:
+            assert vj.result_names(sim.result) != "successful"
+            # It fell on the same step in both simulations.
+            assert int(sim.num_successful) + 1 == b.steps[iy, ix]
+
+
+def test_max_converging_perturbation_brackets():
+    model, z, x_star, _ = stable_gait()
+    d = axis_directions(3)[:2]  # +q1, -q1
+    th = vj.max_converging_perturbation(model, z, d, 0.3, iterations=8, scan=4)
+    assert th.bracketed.all()
+    assert np.all(th.hi - th.lo <= 0.3 / 5 / 2**8 * 1.0001)
+    for i in range(2):
+        ok = long_walk(model, model.section_to_state(z + th.lo[i] * d[i]))
+        bad = long_walk(model, model.section_to_state(z + th.hi[i] * d[i]))
+        assert returns_to(ok, x_star)
+        assert not returns_to(bad, x_star, tol=1e-4)
+
+
+def test_wilson_interval():
+    lo, hi = wilson_interval(50, 100)
+    assert np.isclose(lo, 0.4038, atol=1e-4) and np.isclose(hi, 0.5962, atol=1e-4)
+    lo, hi = wilson_interval(0, 20)
+    assert lo == 0.0 and np.isclose(hi, 0.1611, atol=1e-4)
+
+
+def test_basin_volume_counts(slice8):
+    model, z, _, _ = stable_gait()
+    v = vj.basin_volume(model, z, [0.05, 0.2, 0.5], num_samples=64, chunk=64)
+    assert sum(v.counts.values()) == 64
+    assert v.interval[0] <= v.fraction <= v.interval[1]
+    assert np.isclose(v.volume, v.fraction * 0.1 * 0.4 * 1.0)

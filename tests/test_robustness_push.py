@@ -1,0 +1,74 @@
+"""Hip pushes: the linear sensitivity of the next post-impact state by autodiff through
+the simulation equals the transverse linearization with an input term and central finite
+differences of pushed simulations; the largest survivable push is bracketed by simulation."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import vhcjax as vj
+from vhcjax._push import direction, impulse_step, pulse_step
+
+from _robust import long_walk, returns_to, stable_gait
+
+impulse_step_jit = eqx.filter_jit(impulse_step)
+PHASES = jnp.array([0.0, 0.3, 0.6, 0.9])
+
+
+@pytest.fixture(scope="module")
+def autodiff_sensitivity():
+    model, _, x_star, period = stable_gait()
+    return vj.push_sensitivity_autodiff(model, x_star, period, PHASES)
+
+
+def test_zero_push_is_nominal_step():
+    model, _, x_star, period = stable_gait()
+    sr = impulse_step_jit(model, x_star, 0.5 * period, jnp.zeros(2))
+    np.testing.assert_allclose(np.asarray(sr.x_plus), np.asarray(x_star), atol=1e-9)
+    assert abs(float(sr.period) - period) < 1e-9
+
+
+def test_push_sensitivity_autodiff_vs_finite_differences(autodiff_sensitivity):
+    model, _, x_star, period = stable_gait()
+    D = np.asarray(autodiff_sensitivity)
+    h = 1e-6
+    for i in (1, 3):
+        for j in range(2):
+            e = jnp.zeros(2).at[j].set(h)
+            xp = impulse_step_jit(model, x_star, PHASES[i] * period, e).x_plus
+            xm = impulse_step_jit(model, x_star, PHASES[i] * period, -e).x_plus
+            np.testing.assert_allclose(D[i, :, j], (xp - xm) / (2 * h), rtol=1e-5, atol=1e-7)
+
+
+@pytest.mark.slow
+def test_push_sensitivity_transverse_vs_autodiff(autodiff_sensitivity):
+    model, _, x_star, period = stable_gait()
+    x_minus = vj.step(model, x_star).x_minus
+    Z, lin = vj.push_sensitivity_transverse(model, x_star, x_minus, period, PHASES)
+    zeta_ad = np.einsum("ij,sjk->sik", np.asarray(lin.P_plus), np.asarray(autodiff_sensitivity))
+    np.testing.assert_allclose(np.asarray(Z), zeta_ad, rtol=1e-6, atol=1e-8)
+
+
+def test_short_pulse_approaches_impulse():
+    model, _, x_star, period = stable_gait()
+    P = 0.5 * direction(0.0)
+    tau = 1e-4
+    a = impulse_step_jit(model, x_star, 0.3 * period, P).x_plus
+    b = eqx.filter_jit(pulse_step)(model, x_star, 0.3 * period - tau / 2, P / tau, tau).x_plus
+    np.testing.assert_allclose(np.asarray(b), np.asarray(a), atol=1e-4)
+
+
+def test_max_push_brackets():
+    model, _, x_star, period = stable_gait()
+    phases, angles = np.array([0.2, 0.7]), np.array([0.0, np.pi])
+    res = vj.max_push(model, x_star, period, phases, angles, p_max=20.0, iterations=8, scan=4)
+    th = res.threshold
+    assert th.bracketed.all()
+    for k, (s, a) in enumerate([(s, a) for s in phases for a in angles]):
+        for mag, expect in ((th.lo[k], True), (th.hi[k], False)):
+            sr = impulse_step_jit(model, x_star, s * period, mag * direction(a))
+            ok = vj.result_names(sr.result) == "successful"
+            assert (ok and returns_to(long_walk(model, sr.x_plus), x_star)) == expect
+    assert res.largest.shape == (2, 2)

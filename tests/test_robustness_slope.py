@@ -1,0 +1,80 @@
+"""Slope sensitivity by implicit differentiation vs finite differences of re-solved
+gaits; floor-step terrain: the gait sensitivity norm from the linearized step-to-step map
+vs simulated step times, and the largest survivable step up/down bracketed by simulation."""
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import vhcjax as vj
+from vhcjax._hybrid import DEFAULT_CONFIG
+from vhcjax._poincare import multipliers
+from vhcjax._terrain import floor_step_model
+
+from _robust import fixed_point_jit, long_walk, returns_to, stable_gait, step_jit
+
+multipliers_jit = eqx.filter_jit(multipliers)
+
+
+@pytest.mark.slow
+def test_slope_derivatives_vs_finite_differences():
+    model, z, _, _ = stable_gait()
+    s = vj.slope_sensitivity(model, z)
+    h = 1e-4
+    vals = []
+    for sign in (1, -1):
+        m = eqx.tree_at(lambda q: q.psi, model, model.psi + sign * h)
+        fp = fixed_point_jit(m, z)
+        assert vj.result_names(fp.result) == "successful"
+        sr = step_jit(m, fp.x0)
+        T = float(sr.period)
+        L = float(np.linalg.norm(np.asarray(m.contact_point(sr.x_minus[:2]))))
+        v = L / T
+        ev = np.asarray(multipliers_jit(m, fp.z))
+        vals.append((np.asarray(fp.z), float(T), float(L), float(v), ev[np.argsort(-np.abs(ev))]))
+    fd = [(a - b) / (2 * h) for a, b in zip(vals[0], vals[1])]
+    np.testing.assert_allclose(np.asarray(s.dz), fd[0], rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(float(s.dperiod), fd[1], rtol=1e-5)
+    np.testing.assert_allclose(float(s.dstep_length), fd[2], rtol=1e-5)
+    np.testing.assert_allclose(float(s.dspeed), fd[3], rtol=1e-5)
+    # multipliers: compare the member with non-negative imaginary part of the pair and the
+    # real one (conjugates come in either order from eig).
+    lam = np.asarray(s.multipliers)
+    for i in range(3):
+        j = int(np.argmin(np.abs(vals[0][4] - lam[i]) + np.abs(vals[1][4] - lam[i])))
+        fd_i = (vals[0][4][j] - vals[1][4][j]) / (2 * h)
+        assert abs(s.dmultipliers[i] - fd_i) < 1e-4 * max(1.0, abs(fd_i))
+    fd_mod = (np.abs(vals[0][4]) - np.abs(vals[1][4])) / (2 * h)
+    np.testing.assert_allclose(np.sort(s.dmodulus), np.sort(fd_mod), rtol=1e-4)
+
+
+def test_gait_sensitivity_norm_vs_simulation():
+    model, _, x_star, _ = stable_gait()
+    g = vj.gait_sensitivity_norm(model, x_star, 40)
+    h = 1e-6
+    rec = vj.terrain_recovery(model, x_star, jnp.array([h, -h]), 40, 0.0, DEFAULT_CONFIG,
+                              False)
+    assert (np.asarray(rec.label) != 1).all()
+    fd = (np.asarray(rec.step_times[0]) - np.asarray(rec.step_times[1])) / (2 * h)
+    np.testing.assert_allclose(np.asarray(g.dtimes)[:12], fd[:12], rtol=1e-4, atol=1e-4)
+    np.testing.assert_allclose(float(g.norm), np.linalg.norm(fd), rtol=1e-4)
+
+
+def test_floor_offset_zero_is_nominal_step():
+    model, _, x_star, period = stable_gait()
+    sr = step_jit(floor_step_model(model, 0.0), x_star)
+    np.testing.assert_allclose(np.asarray(sr.x_plus), np.asarray(x_star), atol=1e-9)
+    assert abs(float(sr.period) - period) < 1e-9
+
+
+def test_max_floor_step_brackets():
+    model, _, x_star, _ = stable_gait()
+    th = vj.max_floor_step(model, x_star, h_max=0.1, iterations=8, scan=4, num_steps=40)
+    assert th.bracketed.all()
+    for i, sign in enumerate((-1.0, 1.0)):
+        for mag, expect in ((th.lo[i], True), (th.hi[i], False)):
+            first = step_jit(floor_step_model(model, sign * mag), x_star, throw=False)
+            ok = vj.result_names(first.result) == "successful"
+            survived = ok and returns_to(long_walk(model, first.x_plus), x_star)
+            assert survived == expect, (sign, mag)
