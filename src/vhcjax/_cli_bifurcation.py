@@ -24,8 +24,11 @@ def register(subparsers):
                    help="steps discarded as transient (default 300)")
     p.add_argument("--record", type=int, default=64, help="steps recorded (default 64)")
     p.add_argument("--csv", metavar="FILE",
-                   help="write slope_deg, result, num_distinct, period_1..period_RECORD")
+                   help="write slope_deg, result, pattern, period_1..period_RECORD (pattern: "
+                   "steps per repetition, 0 aperiodic, -1 fell)")
     p.add_argument("--png", metavar="FILE", help="save the bifurcation diagram")
+    p.add_argument("--png-multipliers", metavar="FILE",
+                   help="save |multipliers| of the period-1 family against slope")
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=run_bifurcation)
 
@@ -125,9 +128,9 @@ def run_bifurcation(args):
     names = result_names(diag.result)
     if args.csv:
         with open(args.csv, "w") as f:
-            f.write("slope_deg,result,num_distinct,"
+            f.write("slope_deg,result,pattern,"
                     + ",".join(f"period_{i + 1}" for i in range(args.record)) + "\n")
-            for s, r, nd, per in zip(slopes, names, diag.num_distinct, diag.periods):
+            for s, r, nd, per in zip(slopes, names, diag.period_pattern, diag.periods):
                 f.write(f"{s:.10g},{r},{nd}," + ",".join(f"{x:.12g}" for x in per) + "\n")
     if args.png:
         from ._plot_stability import plot_bifurcation
@@ -138,6 +141,12 @@ def run_bifurcation(args):
             branches.append(("period 2", np.degrees(branch2["psi"]), branch2["periods"],
                              branch2["stable"]))
         plot_bifurcation(diag, branches, args.png, flips_deg=[math.degrees(f) for f in flips])
+    if args.png_multipliers:
+        from ._plot_stability import plot_multipliers_vs_slope
+
+        plot_multipliers_vs_slope(np.degrees(psis)[ok1],
+                                  {"stable family": np.asarray(mult.transverse)[ok1]},
+                                  args.png_multipliers)
     fell = np.asarray(diag.fell)
     out = {
         "period_doubling_slopes_deg": [math.degrees(f) for f in flips],

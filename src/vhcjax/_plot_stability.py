@@ -88,7 +88,7 @@ def _branch(ax, x, y, stable, color, label):
         for i in range(1, len(x)):
             if stable[i] != stable[i - 1] and stable[i] == s:
                 yy[i - 1] = y[i - 1]
-        ax.plot(x, yy, "-" if s else "--", color=color, lw=1.4,
+        ax.plot(x, yy, "-" if s else "--", color=color, lw=1.2, alpha=0.75, zorder=2,
                 label=f"{label} ({'stable' if s else 'unstable'})" if first[s] else None)
         first[s] = False
 
@@ -107,8 +107,8 @@ def plot_bifurcation(diagram, branches=(), path=None, flips_deg=()):
     P = np.asarray(diagram.periods)
     ok = ~np.asarray(diagram.fell)
     xs = np.repeat(deg[ok], P.shape[1])
-    ax.plot(xs, P[ok].ravel(), ",", color="k", alpha=0.6, label="simulation (last steps)")
-    ax.plot([], [], ".", color="k", label="simulation (last steps)")  # visible legend key
+    ax.plot(xs, P[ok].ravel(), ".", color="k", ms=1.2, mew=0, zorder=3,
+            label="simulation (last steps)")
     if np.any(~ok):
         ymin = np.min(P[ok]) if np.any(ok) else 0.0
         ax.plot(deg[~ok], np.full(np.sum(~ok), ymin - 0.01), "x", color="C3", ms=4,
@@ -126,8 +126,8 @@ def plot_bifurcation(diagram, branches=(), path=None, flips_deg=()):
     ax.set_title("Compass gait: step periods after transients (Goswami et al. 1998)")
     handles, labels = ax.get_legend_handles_labels()
     keep = [(h, lab) for h, lab in zip(handles, labels) if not lab.startswith("_")]
-    keep = keep[1:] if keep and keep[0][1] == "simulation (last steps)" else keep
-    ax.legend([h for h, _ in keep], [lab for _, lab in keep], fontsize=8, loc="upper left")
+    ax.legend([h for h, _ in keep], [lab for _, lab in keep], fontsize=8, loc="upper left",
+              markerscale=6)
     fig.tight_layout()
     if path:
         fig.savefig(path, dpi=130)

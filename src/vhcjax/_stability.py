@@ -28,7 +28,7 @@ from ._compass_gait import CompassGait
 from ._hybrid import DEFAULT_CONFIG, FAST_CONFIG, _solver, _step, simulate
 from ._poincare import fixed_point, jacobian, step_map
 from ._results import RESULTS
-from ._transverse import transverse_linearization
+from ._transverse import TransverseLinearization, transverse_linearization
 
 #: Stable and unstable period-1 gaits of the default compass gait at 3 degrees
 #: (section coordinates $(q_1, \dot q_1, \dot q_2)$), seeds for the continuation.
@@ -57,6 +57,7 @@ class GaitMultipliers(eqx.Module):
     - `stable`: `max_abs < 1`.
     - `period`, `x_minus`: from the hybrid step.
     - `result`: `successful` or the first failure of the step / the linearization.
+    - `linearization`: the full `TransverseLinearization` (Xi, Phi(T), dF, ...).
     """
 
     transverse: jax.Array
@@ -66,6 +67,7 @@ class GaitMultipliers(eqx.Module):
     period: jax.Array
     x_minus: jax.Array
     result: RESULTS
+    linearization: TransverseLinearization
 
 
 def gait_multipliers(model, z, config=DEFAULT_CONFIG):
@@ -77,7 +79,7 @@ def gait_multipliers(model, z, config=DEFAULT_CONFIG):
     pm = _sort(jnp.linalg.eigvals(jacobian(model, z, 1, config)))
     code = RESULTS.where(sr.result == RESULTS.successful, tl.result, sr.result)
     mx = jnp.max(jnp.abs(tl.multipliers))
-    return GaitMultipliers(tl.multipliers, pm, mx, mx < 1.0, sr.period, sr.x_minus, code)
+    return GaitMultipliers(tl.multipliers, pm, mx, mx < 1.0, sr.period, sr.x_minus, code, tl)
 
 
 gait_multipliers_jit = eqx.filter_jit(gait_multipliers)
@@ -115,7 +117,10 @@ def _gated_strike_event(model):
 
     def cond(t, y, args, **kwargs):
         q = y[: model.n_dof]
-        return jnp.where(model.strike_gate(q) > 0, model.guard(q), 1.0 + jnp.abs(model.guard(q)))
+        # Negative while the gate is closed: opening it is then never a downward crossing,
+        # whatever the sign of the guard there (it is negative when the legs cross below
+        # the slope line, as for the unstable family).
+        return jnp.where(model.strike_gate(q) > 0, model.guard(q), -1.0 - jnp.abs(model.guard(q)))
 
     return diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13),
                          direction=False)
@@ -352,15 +357,15 @@ class BifurcationDiagram(eqx.Module):
       zero after a fall).
     - `fell` (B,): the walker did not complete all steps.
     - `result` (B,): first failure code per slope.
-    - `num_distinct` (B,): number of distinct step periods among the recorded ones
-      (1e-6 s resolution; -1 where it fell): 1 = period 1, 2 = period 2, ...
+    - `period_pattern` (B,): `detect_period` of the recorded step periods: 1, 2, 4, ...
+      steps per repetition, 0 if aperiodic (chaotic or not settled), -1 where it fell.
     """
 
     psi: np.ndarray
     periods: np.ndarray
     fell: np.ndarray
     result: np.ndarray
-    num_distinct: np.ndarray
+    period_pattern: np.ndarray
 
 
 @eqx.filter_jit
@@ -406,19 +411,29 @@ def bifurcation_diagram(psis, zs, *, model=None, num_transient=300, num_record=6
     periods = np.concatenate(P)
     codes = np.concatenate(R)
     fell = codes != int(RESULTS.successful._value)
-    nd = np.array([-1 if f else count_distinct(pp) for pp, f in zip(periods, fell)])
+    nd = np.array([-1 if f else detect_period(pp) for pp, f in zip(periods, fell)])
     return BifurcationDiagram(psis, periods, fell, codes, nd)
 
 
+def detect_period(periods, tol=1e-5, candidates=(1, 2, 4, 8, 16, 32)):
+    """Smallest p in `candidates` with `periods[i + p] == periods[i]` (within `tol` s)
+    for all recorded i; 0 if none (aperiodic, e.g. chaotic, or not settled)."""
+    periods = np.asarray(periods)
+    for p in candidates:
+        if p < len(periods) and np.max(np.abs(periods[p:] - periods[:-p])) < tol:
+            return p
+    return 0
+
+
 def period_doubling_slopes_from_diagram(diagram):
-    """Slopes (rad) where the number of distinct recorded periods first reaches 2, 4,
-    8, ... (midpoints between neighbouring slopes), from a `BifurcationDiagram`; a
-    coarse, simulation-only estimate of the cascade."""
+    """Slopes (rad) where the detected step-period pattern (`detect_period`) first reaches
+    2, 4, 8, ... (midpoints between neighbouring slopes), from a `BifurcationDiagram`: a
+    simulation-only estimate of the cascade, as coarse as the slope grid."""
+    per = np.asarray(diagram.period_pattern)
     out = []
-    nd = diagram.num_distinct
     target = 2
-    for i in range(1, len(nd)):
-        if nd[i] >= target and 0 < nd[i - 1] < target:
+    for i in range(1, len(per)):
+        if per[i] >= target and 0 < per[i - 1] < target:
             out.append(0.5 * (diagram.psi[i - 1] + diagram.psi[i]))
             target *= 2
     return out
@@ -483,3 +498,31 @@ def period2_branch(model, pd, psis, config=DEFAULT_CONFIG, amplitudes=(3e-3, 1e-
             flip = None
     return {"psi": np.asarray(out_psi), "z": np.stack(out_z), "periods": np.stack(out_T),
             "max_abs": mx, "stable": stable, "flip_psi": flip}
+
+
+# ---- output helpers for the `gait` command (JSON fields and sweep CSV columns) -----------
+CSV_COLUMNS = ["mult1_re", "mult1_im", "mult2_re", "mult2_im", "mult3_re", "mult3_im",
+               "max_abs_multiplier", "stable"]
+
+
+def stability_json(gm, index=None):
+    """JSON fields `multipliers` (transverse linearization), `multipliers_poincare` (each
+    a list of `[re, im]`) and `stable` from a (possibly batched, then `index`)
+    `GaitMultipliers`."""
+    tr, pc, st = np.asarray(gm.transverse), np.asarray(gm.poincare), np.asarray(gm.stable)
+    if index is not None:
+        tr, pc, st = tr[index], pc[index], st[index]
+    return {"multipliers": [[float(e.real), float(e.imag)] for e in tr],
+            "multipliers_poincare": [[float(e.real), float(e.imag)] for e in pc],
+            "stable": bool(st)}
+
+
+def stability_csv_row(gm, index=None):
+    """Values for `CSV_COLUMNS` (transverse multipliers, by modulus, descending)."""
+    tr = np.asarray(gm.transverse)
+    tr = tr if index is None else tr[index]
+    row = []
+    for e in tr:
+        row += [float(e.real), float(e.imag)]
+    mx = float(np.max(np.abs(tr)))
+    return row + [mx, bool(mx < 1.0)]
