@@ -70,3 +70,20 @@ def test_basin_volume_counts(slice8):
     assert sum(v.counts.values()) == 64
     assert v.interval[0] <= v.fraction <= v.interval[1]
     assert np.isclose(v.volume, v.fraction * 0.1 * 0.4 * 1.0)
+
+
+@pytest.mark.parametrize("argv", [
+    ["basin", "--axes", "q1,foo"],
+    ["basin", "--axes", "q1,q1"],
+    ["basin", "--grid", "1", "5"],
+    ["basin", "--half-widths", "0", "0.1"],
+    ["push", "--phases", "0"],
+    ["contraction", "--scale", "-1"],
+    ["slope-sensitivity", "--heights-mm", "nan"],
+])
+def test_cli_rejects_bad_input(argv, capsys):
+    from vhcjax.cli import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"vhcjax {argv[0]}: error:") and err.count("\n") == 1
