@@ -1,0 +1,156 @@
+"""The passive kneed walker: a two-domain model run by the unchanged simulator, step map,
+Newton shooting and Poincare multipliers."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import vhcjax
+from vhcjax import _poincare as P
+from vhcjax._kneed_walker import KneedWalker
+from vhcjax._multidomain import multidomain_trajectory
+from vhcjax._results import RESULTS
+
+fixed_point_jit = eqx.filter_jit(P.fixed_point)
+jacobian_jit = eqx.filter_jit(P.jacobian)
+simulate_jit = eqx.filter_jit(vhcjax.simulate)
+trajectory_jit = eqx.filter_jit(multidomain_trajectory)
+GUESS = jnp.array([0.19, -1.10, -0.04])  # near the Hsu Chen (2007) initial condition
+
+
+@pytest.fixture(scope="module")
+def kw():
+    return KneedWalker(psi=jnp.asarray(0.0504))
+
+
+@pytest.fixture(scope="module")
+def gait(kw):
+    sol = fixed_point_jit(kw, GUESS)
+    assert sol.result == RESULTS.successful
+    assert float(sol.residual) < 1e-10
+    return sol
+
+
+def test_gait_confirmed_by_100_step_simulation(kw, gait):
+    sim = simulate_jit(kw, gait.x0, 100)
+    assert sim.result == RESULTS.successful and int(sim.num_successful) == 100
+    z = jax.vmap(kw.state_to_section)(sim.steps.x_plus)
+    assert np.max(np.abs(z - gait.z)) < 1e-8
+    np.testing.assert_allclose(sim.steps.period, gait.periods[0], rtol=1e-9)
+    # a genuine walk: the knee bends (domain 0 lasts) and the feet move forward
+    assert 0.2 < float(gait.periods[0]) < 1.5
+    assert float(gait.z[0]) > 0 and float(gait.z[1]) < 0
+
+
+def test_converges_from_perturbed_start(kw, gait):
+    x0 = kw.section_to_state(gait.z + jnp.array([0.01, 0.05, -0.1]))
+    sim = simulate_jit(kw, x0, 100)
+    assert sim.result == RESULTS.successful
+    z_end = kw.state_to_section(sim.steps.x_plus[-1])
+    z_first = kw.state_to_section(sim.steps.x_plus[0])
+    assert np.max(np.abs(z_first - gait.z)) > 1e-3
+    assert np.max(np.abs(z_end - gait.z)) < 1e-9
+
+
+def test_energy_conserved_within_each_phase_and_lost_at_impacts(kw, gait):
+    ts, xs, info = trajectory_jit(kw, gait.x0, 40)
+    assert np.all(np.asarray(info.result._value) == RESULTS.successful._value)
+    energy = jax.vmap(jax.vmap(kw.energy))(xs)
+    for i in range(2):
+        assert np.ptp(np.asarray(energy[i])) < 1e-8, i
+    # the knee stays locked in domain 1 (constraint drift)
+    np.testing.assert_allclose(xs[1, :, 1], xs[1, :, 2], atol=1e-9)
+    np.testing.assert_allclose(xs[1, :, 4], xs[1, :, 5], atol=1e-9)
+    # both impacts dissipate kinetic energy (the heel-strike post-impact state is in the
+    # new labelling, whose pinned stance foot is at rest, so its kinetic energy is the true one)
+    def kinetic(x):
+        return float(kw.kinetic_energy(x[:3], x[3:]))
+
+    assert kinetic(info.x_start[1]) < kinetic(info.x_end[0])  # knee strike
+    assert kinetic(gait.x0) < kinetic(info.x_end[1])  # heel strike
+    assert float(info.duration[0]) > 0.05 and float(info.duration[1]) > 0.05
+    # knee strike happens with the swing leg ahead of the stance leg
+    assert float(info.x_end[0][1]) > float(info.x_end[0][0])
+
+
+def test_impacts_at_the_gait_conserve_angular_momentum(kw, gait):
+    _, info = eqx.filter_jit(vhcjax.multidomain_step)(kw, gait.x0)
+    # knee strike
+    x = info.x_end[0]
+    q, dq = x[:3], x[3:]
+    dqp = info.x_start[1][3:]
+    np.testing.assert_allclose(
+        kw.angular_momentum(q, dqp, jnp.zeros(2)), kw.angular_momentum(q, dq, jnp.zeros(2)),
+        rtol=1e-12,
+    )
+    np.testing.assert_allclose(kw.swing_leg_momentum(q, dqp), kw.swing_leg_momentum(q, dq),
+                               rtol=1e-12)
+    # heel strike: before relabelling, with the old stance foot lifting off
+    from vhcjax._kneed_walker import _KNEE
+    from vhcjax._multidomain import augmented_impact_locked
+
+    x = info.x_end[1]
+    q, dq = x[:3], x[3:]
+    dqp, dzp, impulse = augmented_impact_locked(kw, q, dq, _KNEE)
+    foot = kw.contact_point(q)
+    np.testing.assert_allclose(
+        kw.angular_momentum(q, dqp, foot, dzp), kw.angular_momentum(q, dq, foot), rtol=1e-12
+    )
+    np.testing.assert_allclose(kw.stance_leg_momentum(q, dqp, dzp), kw.stance_leg_momentum(q, dq),
+                               rtol=1e-12)
+    np.testing.assert_allclose(impulse, info.impulse[1], rtol=1e-12)
+    assert float(impulse @ kw.slope_normal) > 0  # pushes, does not pull
+    # the relabelled post-impact state is the next cycle's start
+    np.testing.assert_allclose(kw.relabel(q, dqp)[1], gait.x0[3:], rtol=1e-9, atol=1e-9)
+
+
+def test_multipliers_autodiff_vs_central_differences(kw, gait):
+    J = np.asarray(jacobian_jit(kw, gait.z))
+    h = 1e-6
+
+    @eqx.filter_jit
+    def fd(model, z):
+        E = jnp.eye(3) * h
+        plus = jax.vmap(lambda e: P.step_map(model, z + e).z_next)(E)
+        minus = jax.vmap(lambda e: P.step_map(model, z - e).z_next)(E)
+        return ((plus - minus) / (2 * h)).T
+
+    Jfd = np.asarray(fd(kw, gait.z))
+    np.testing.assert_allclose(J, Jfd, atol=2e-6 * np.abs(J).max())
+    ev = np.sort_complex(np.linalg.eigvals(J))
+    ev_fd = np.sort_complex(np.linalg.eigvals(Jfd))
+    np.testing.assert_allclose(ev, ev_fd, atol=1e-5)
+    assert np.abs(ev).max() < 1.0  # the passive gait is stable
+
+
+@pytest.mark.slow
+def test_slope_range_by_continuation(kw, gait):
+    """Stable gaits exist from 0.0354 to 0.1054 rad (continuation in 0.005 steps from the
+    Chen slope, secant predictor); at 0.1104 the continued gait is unstable, which a
+    simulation from a 1e-6 perturbation confirms (it drifts away)."""
+    z_prev, z = gait.z, gait.z
+    psi = 0.0504
+    found = {}
+    for target in (0.1054, 0.1104, 0.0354):
+        if target < psi:
+            z_prev, z, psi = gait.z, gait.z, 0.0504
+        while abs(psi - target) > 1e-9:
+            psi_new = psi + np.sign(target - psi) * 0.005
+            guess = 2 * z - z_prev if psi != 0.0504 else z
+            sol = fixed_point_jit(KneedWalker(psi=jnp.asarray(psi_new)), guess)
+            assert sol.result == RESULTS.successful, psi_new
+            z_prev, z, psi = z, sol.z, psi_new
+        model = KneedWalker(psi=jnp.asarray(psi))
+        found[target] = (model, z, np.abs(np.linalg.eigvals(np.asarray(jacobian_jit(model, z)))).max())
+    assert found[0.1054][2] < 1.0 and found[0.0354][2] < 1.0
+    assert found[0.1104][2] > 1.05
+    model, z, _ = found[0.1104]
+    x0 = model.section_to_state(z + jnp.array([1e-6, 0.0, 0.0]))
+    sim = simulate_jit(model, x0, 100)
+    zs = jax.vmap(model.state_to_section)(sim.steps.x_plus)
+    ok = np.asarray(sim.steps.result._value) == RESULTS.successful._value
+    dist = np.max(np.abs(np.asarray(zs) - np.asarray(z)), axis=1)
+    assert dist[0] < 1e-4  # starts next to the gait ...
+    assert not ok.all() or dist.max() > 1e-3  # ... and leaves it
