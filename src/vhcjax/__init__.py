@@ -43,6 +43,13 @@ from ._multidomain import (
     multidomain_step as multidomain_step,
     multidomain_trajectory as multidomain_trajectory,
 )
+from ._pendulum_walker import PendulumWalker as PendulumWalker
+from ._vhc_search import (
+    VHCGait as VHCGait,
+    VHCOrbit as VHCOrbit,
+    vhc_gait_search as vhc_gait_search,
+    vhc_orbit as vhc_orbit,
+)
 
 # ---- robustness: contraction, basin of attraction, slope/terrain sensitivity, pushes (issue 5) ----
 from ._basin import (
