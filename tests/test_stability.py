@@ -1,0 +1,188 @@
+"""Stability: section independence, growth/decay rates in direct simulation, period
+doubling, period-2 gaits, the bifurcation runs and the CLI."""
+
+import json
+import math
+
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import vhcjax
+from vhcjax import CompassGait
+from vhcjax import _stability as S
+
+PSI3 = math.radians(3.0)
+
+
+@pytest.fixture(scope="module")
+def gaits3():
+    """The stable and the unstable gait at 3 degrees (Newton from rounded seeds)."""
+    m = S.with_slope(CompassGait(), PSI3)
+    out = {}
+    for fam, seed in (("stable", (0.2187, -1.092, -0.377)), ("unstable", (0.2047, -1.211, -0.712))):
+        fp = S._fixed_point_jit(m, jnp.asarray(seed), 1, config=vhcjax.DEFAULT_CONFIG)
+        assert fp.result == vhcjax.RESULTS.successful
+        J = np.asarray(S._jacobian_jit(m, fp.z, 1, vhcjax.DEFAULT_CONFIG))
+        out[fam] = (np.asarray(fp.z), J)
+    return m, out
+
+
+@pytest.mark.parametrize("family", ["stable", "unstable"])
+def test_multipliers_do_not_depend_on_the_section(gaits3, family):
+    """Post-impact section vs the mid-swing section q1 = 0 (its own event machinery)."""
+    m, g = gaits3
+    z, J = g[family]
+    ev_mid, w, ok = S.midswing_multipliers(m, jnp.asarray(z))
+    assert bool(ok)
+    assert abs(float(w[0]) - float(z[0])) > 1e-3  # really another section
+    ev_post = np.linalg.eigvals(J)
+    for lam in np.asarray(ev_mid):
+        assert np.min(np.abs(ev_post - lam)) < 1e-6
+
+
+def _deviations(m, z, dz, num_steps):
+    sim = S._simulate_jit(m, m.section_to_state(jnp.asarray(z + dz)), num_steps,
+                          config=vhcjax.DEFAULT_CONFIG)
+    assert sim.result == vhcjax.RESULTS.successful
+    zk = np.asarray(jnp.stack([m.state_to_section(x) for x in sim.steps.x_plus]))
+    return np.concatenate([dz[None], zk - z[None]], axis=0)
+
+
+def test_unstable_gait_perturbation_grows_at_the_largest_multiplier(gaits3):
+    """A perturbation in a generic direction aligns with the unstable direction and then
+    grows by |lambda_1| per step in direct simulation (within 5 %)."""
+    m, g = gaits3
+    z, J = g["unstable"]
+    lam = np.max(np.abs(np.linalg.eigvals(J)))
+    d = _deviations(m, z, 1e-9 * np.array([1.0, -1.0, 1.0]), 8)
+    norms = np.linalg.norm(d, axis=1)
+    ratios = norms[1:] / norms[:-1]
+    assert norms[-1] < 1e-3  # still in the linear regime
+    np.testing.assert_allclose(ratios[3:], lam, rtol=0.05)
+
+
+def test_stable_gait_perturbation_decays_at_the_largest_multiplier(gaits3):
+    """The dominant multipliers of the stable gait are a complex pair: in the real
+    invariant plane of the pair (basis Re v, Im v) a perturbation rotates and shrinks by
+    exactly |lambda_1| per step; measured in direct simulation (within 5 %)."""
+    m, g = gaits3
+    z, J = g["stable"]
+    ev, V = np.linalg.eig(J)
+    i = int(np.argmax(np.abs(ev)))
+    W = np.stack([V[:, i].real, V[:, i].imag, V[:, np.argmin(np.abs(ev))].real], axis=1)
+    d = _deviations(m, z, 1e-5 * (W[:, 0] + 0.3 * W[:, 1]), 10)
+    c = np.linalg.solve(W, d.T).T[:, :2]
+    r = np.linalg.norm(c, axis=1)
+    np.testing.assert_allclose(r[1:] / r[:-1], np.abs(ev[i]), rtol=0.05)
+    # and it turns by arg(lambda_1) per step in that plane (110 deg here)
+    cos = np.sum(c[1:] * c[:-1], axis=1) / (r[1:] * r[:-1])
+    np.testing.assert_allclose(np.arccos(cos), abs(np.angle(ev[i])), rtol=0.05)
+    assert np.linalg.norm(d[-1]) < 1e-2 * np.linalg.norm(d[0])  # it does decay
+
+
+@pytest.fixture(scope="module")
+def flip():
+    """The period-doubling slope of the stable family."""
+    m = CompassGait()
+    lo, hi = math.radians(4.25), math.radians(4.5)
+    fp = S._fixed_point_jit(S.with_slope(m, lo), jnp.asarray((0.2275, -1.14, -0.20)), 1,
+                            config=vhcjax.DEFAULT_CONFIG)
+    assert fp.result == vhcjax.RESULTS.successful
+    return S.period_doubling_slope(lo, hi, np.asarray(fp.z), model=m)
+
+
+@pytest.mark.slow
+def test_period_doubling_slope_located_to_1e_4_degrees(flip):
+    assert flip.bracket[1] - flip.bracket[0] < math.radians(1e-4)
+    # a multiplier is -1 there (autodiff Jacobian of the step map)
+    assert np.min(np.abs(flip.multipliers + 1.0)) < 1e-4
+    # and, independently, central finite differences of the step map bracket it:
+    # det(I + J_fd) changes sign across psi +- 1e-4 deg
+    m = CompassGait()
+    signs = []
+    for dpsi in (-1e-4, 1e-4):
+        p = flip.psi + math.radians(dpsi)
+        fp = S._fixed_point_jit(S.with_slope(m, p), jnp.asarray(flip.z), 1,
+                                config=vhcjax.DEFAULT_CONFIG)
+        Jfd = S.finite_difference_jacobian_jit(S.with_slope(m, p), fp.z, 1, 1e-5,
+                                               vhcjax.DEFAULT_CONFIG)
+        signs.append(np.sign(np.linalg.det(np.eye(3) + np.asarray(Jfd))))
+    assert signs[0] * signs[1] < 0
+
+
+@pytest.mark.slow
+def test_period_two_gait_is_a_fixed_point_of_two_simulator_steps(flip):
+    m = CompassGait()
+    psi = flip.psi + math.radians(0.2)
+    br = S.period2_branch(m, flip, [psi])
+    assert br is not None and len(br["psi"]) == 1
+    z = br["z"][0]
+    mm = S.with_slope(m, psi)
+    sim = S._simulate_jit(mm, mm.section_to_state(jnp.asarray(z)), 2,
+                          config=vhcjax.DEFAULT_CONFIG)
+    assert sim.result == vhcjax.RESULTS.successful
+    z1 = np.asarray(mm.state_to_section(sim.steps.x_plus[0]))
+    z2 = np.asarray(mm.state_to_section(sim.steps.x_plus[1]))
+    np.testing.assert_allclose(z2, z, atol=1e-9)
+    assert np.max(np.abs(z1 - z)) > 1e-3  # not the period-1 gait
+    T = np.asarray(sim.steps.period)
+    assert abs(T[0] - T[1]) > 1e-3  # a long and a short step
+    # just past the flip the period-2 gait is stable
+    assert br["stable"][0]
+
+
+@pytest.mark.parametrize("argv", [
+    ["bifurcation", "--slope-deg", "5:1:0.1"],
+    ["bifurcation", "--slope-deg", "1:2"],
+    ["bifurcation", "--slope-deg", "0:2:0.5"],
+    ["bifurcation", "--slope-deg", "1:2:0.5", "--record", "0"],
+    ["bifurcation", "--slope-deg", "1:2:0.5", "--mass-hip", "-1"],
+    ["multipliers", "--slope-deg", "45"],
+])
+def test_cli_bad_input_is_one_line_error(argv, capsys):
+    from vhcjax.cli import main
+
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "error" in err[0]
+
+
+@pytest.mark.slow
+def test_cli_bifurcation_json_and_files(tmp_path, capsys):
+    """End to end on six slopes (the batch size of test_transverse: compiled once): a
+    period-1 pattern at 3 degrees whose step period is the Newton gait's."""
+    from vhcjax.cli import main
+
+    csv, png = tmp_path / "b.csv", tmp_path / "b.png"
+    assert main(["bifurcation", "--slope-deg", "2.75:3.0:0.05", "--transient", "40",
+                 "--record", "8", "--json", "--csv", str(csv), "--png", str(png)]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["period_doubling_slopes_deg"] == [] and out["num_fell"] == 0
+    rows = csv.read_text().splitlines()
+    assert rows[0].startswith("slope_deg,result,pattern,period_1")
+    assert len(rows) == 7
+    r3 = rows[6].split(",")
+    assert r3[1] == "successful" and r3[2] == "1"
+    # the simulated step period (FAST_CONFIG, after 40 steps) is the Newton gait's period
+    fp = S._fixed_point_jit(S.with_slope(CompassGait(), PSI3), jnp.asarray((0.2187, -1.092, -0.377)),
+                            1, config=vhcjax.DEFAULT_CONFIG)
+    assert abs(float(r3[3]) - float(fp.periods[0])) < 1e-6
+    assert png.stat().st_size > 10_000
+
+
+@pytest.mark.slow
+def test_period_four_gait_at_five_degrees():
+    """Thesis 7.4: a four-step gait at 5 degrees. Newton on P^4 from a rounded seed: its
+    minimal period is 4, the simulator returns to it after 4 steps, and its P^4
+    multipliers (autodiff = central differences) are inside the unit circle."""
+    m5 = S.with_slope(CompassGait(), math.radians(5.0))
+    o = S.period_k_orbit(m5, np.array([0.2178, -1.1614, -0.1080]), 4)
+    assert o.result == vhcjax.RESULTS.successful and o.minimal_period == 4
+    for a in o.multipliers:
+        assert np.min(np.abs(o.multipliers_fd - a)) < 1e-6
+    assert np.max(np.abs(o.multipliers)) < 1.0
+    sim = S._simulate_jit(m5, m5.section_to_state(jnp.asarray(o.z)), 4,
+                          config=vhcjax.DEFAULT_CONFIG)
+    np.testing.assert_allclose(m5.state_to_section(sim.steps.x_plus[-1]), o.z, atol=1e-9)
+    assert len(np.unique(np.round(np.asarray(sim.steps.period), 4))) == 4
