@@ -97,7 +97,8 @@ x_start = model.section_to_state(fp.z + jnp.array([0.0, 0.01, 0.0]))
 sim = eqx.filter_jit(vj.simulate)(model, x_start, 60)
 z_path = jax.vmap(model.state_to_section)(sim.steps.x_plus)
 dist = np.max(np.abs(np.asarray(z_path) - np.asarray(fp.z)), axis=1)
-print("simulation:", vj.result_names(sim.result), "distance to the gait, first/last:", dist[0], dist[-1])
+print("simulation:", vj.result_names(sim.result), "| distance to the gait, first/last:",
+      dist[0], dist[-1])
 assert sim.result == vj.RESULTS.successful and dist[-1] < 1e-6 * max(dist[0], 1.0)
 
 # %% [markdown]

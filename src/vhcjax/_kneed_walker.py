@@ -120,8 +120,8 @@ class KneedWalker(MultiDomainModel):
         return self.g * sum(getattr(self, m) * (pts[p][1] - zero[p][1]) for p, m in self._MASSES)
 
     def angular_momentum(self, q, dq, about, base_velocity=None):
-        """Angular momentum (z component) of the point masses about the point `about`
-        (world frame); `members` of the sum can be restricted with `_MASSES` names."""
+        """Angular momentum (z component) of all point masses about the point `about`
+        (world frame), the stance foot moving at `base_velocity` (default: pinned)."""
         return self._momentum(q, dq, about, [p for p, _ in self._MASSES], base_velocity)
 
     def swing_leg_momentum(self, q, dq, base_velocity=None):

@@ -132,7 +132,8 @@ class MultiDomainModel(WalkerModel):
 
     def hybrid_step(self, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None, vector_field=None):
         """One full cycle (all domains) from a post-heel-strike state; the hook called by
-        `_hybrid._step`. Same contract as `_hybrid._step`: returns a `StepResult`."""
+        `_hybrid._step`. Same contract as `_hybrid._step`: returns a `StepResult`.
+        (`vector_field` overrides are single-domain only and are ignored here.)"""
         return multidomain_step(self, x0, config, alive, adjoint)[0]
 
 
@@ -207,7 +208,8 @@ def multidomain_step(model, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None)
         x_end, dt, code_i = _swing(view, x, t_max, live, config, adjoint, None)
         x_plus, impulse, physical = model.domain_reset(i, x_end)
         finite = jnp.all(jnp.isfinite(x_plus)) & jnp.all(jnp.isfinite(impulse))
-        code_i = RESULTS.where((code_i == RESULTS.successful) & ~physical, RESULTS.bad_impact, code_i)
+        ok_i = code_i == RESULTS.successful
+        code_i = RESULTS.where(ok_i & ~physical, RESULTS.bad_impact, code_i)
         code_i = RESULTS.where((code_i == RESULTS.successful) & ~finite, RESULTS.nonfinite, code_i)
         code = RESULTS.where(code == RESULTS.successful, code_i, code)
         ok = code == RESULTS.successful
