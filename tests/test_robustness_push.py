@@ -51,6 +51,7 @@ def test_push_sensitivity_transverse_vs_autodiff(autodiff_sensitivity):
     np.testing.assert_allclose(np.asarray(Z), zeta_ad, rtol=1e-6, atol=1e-8)
 
 
+@pytest.mark.slow
 def test_short_pulse_approaches_impulse():
     model, _, x_star, period = stable_gait()
     P = 0.5 * direction(0.0)

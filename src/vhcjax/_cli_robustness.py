@@ -78,7 +78,7 @@ def register(subparsers):
         "the slope (implicit differentiation), the largest single step up/down survived, "
         "recovery curves and the gait sensitivity norm for floor-height disturbances.")
     _common(p, "save the recovery after floor steps (and <FILE>-slope.png: derivatives)")
-    p.add_argument("--heights-mm", type=float, nargs="+", default=[-15, -5, 2, 5],
+    p.add_argument("--heights-mm", type=float, nargs="+", default=[-15, -12, -5, 2, 5],
                    help="floor steps (mm, + up) for the recovery curves")
     p.add_argument("--steps", type=int, default=40, help="steps after the floor step")
     p.add_argument("--no-derivatives", action="store_true",

@@ -88,7 +88,7 @@ def plot_terrain(heights, rec, period, path, gsn=None):
     for i, h in enumerate(hs):
         n = int(np.sum(T[i] > 0))
         c = cmap(0.5 + 0.5 * h / hmax)
-        lbl = f"h = {1000 * h:+.1f} mm" + ("" if rec.label[i] == 0 else " (falls)")
+        lbl = f"h = {1000 * h:+.1f} mm" + (" (falls)" if int(rec.label[i]) == 1 else "")
         a1.plot(np.arange(n), T[i, :n], "o-", ms=3, color=c, label=lbl)
         a2.semilogy(np.arange(n + 1), np.maximum(d[i, : n + 1], 1e-12), "o-", ms=3, color=c)
     a1.axhline(period, color="k", lw=0.8, ls="--", label="gait period")
