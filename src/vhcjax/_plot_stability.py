@@ -107,8 +107,8 @@ def plot_bifurcation(diagram, branches=(), path=None, flips_deg=()):
     P = np.asarray(diagram.periods)
     ok = ~np.asarray(diagram.fell)
     xs = np.repeat(deg[ok], P.shape[1])
-    ax.plot(xs, P[ok].ravel(), ".", color="k", ms=1.2, mew=0, zorder=3,
-            label="simulation (last steps)")
+    ax.plot(xs, P[ok].ravel(), ".", color="k", ms=1.2, mew=0, zorder=3)
+    ax.plot([], [], ".", color="k", ms=5, label="simulation (last steps)")  # legend key
     if np.any(~ok):
         ymin = np.min(P[ok]) if np.any(ok) else 0.0
         ax.plot(deg[~ok], np.full(np.sum(~ok), ymin - 0.01), "x", color="C3", ms=4,
@@ -126,8 +126,7 @@ def plot_bifurcation(diagram, branches=(), path=None, flips_deg=()):
     ax.set_title("Compass gait: step periods after transients (Goswami et al. 1998)")
     handles, labels = ax.get_legend_handles_labels()
     keep = [(h, lab) for h, lab in zip(handles, labels) if not lab.startswith("_")]
-    ax.legend([h for h, _ in keep], [lab for _, lab in keep], fontsize=8, loc="upper left",
-              markerscale=6)
+    ax.legend([h for h, _ in keep], [lab for _, lab in keep], fontsize=8, loc="upper left")
     fig.tight_layout()
     if path:
         fig.savefig(path, dpi=130)
