@@ -266,7 +266,7 @@ def run_push(args):
     if args.png:
         from ._plot_robustness import plot_push
 
-        plot_push(phases, D, angles, res.largest, args.png, unit)
+        plot_push(phases, D, angles, res.largest, args.png, unit, p_max=args.max)
     if args.json:
         print_json(out)
     else:

@@ -106,7 +106,7 @@ def plot_terrain(heights, rec, period, path, gsn=None):
     plt.close(fig)
 
 
-def plot_push(phases, sens, angles, largest, path, unit="N s"):
+def plot_push(phases, sens, angles, largest, path, unit="N s", p_max=None):
     """Left: norm of the post-impact state's sensitivity to a unit hip impulse vs phase
     (forward and upward). Right: largest push survived vs phase, per direction."""
     plt = _plt()
@@ -120,6 +120,8 @@ def plot_push(phases, sens, angles, largest, path, unit="N s"):
     a1.legend(fontsize=8)
     for j, a in enumerate(angles):
         a2.plot(phases, largest[:, j], "o-", ms=3, label=f"{np.degrees(a):.0f} deg")
+    if p_max is not None:
+        a2.axhline(p_max, color="k", lw=0.8, ls=":", label="search bound (survived beyond)")
     a2.set_xlabel("phase s of the push in the step")
     a2.set_ylabel(f"largest push survived ({unit})")
     a2.set_title("Largest push after which the walker returns to the gait\n"
