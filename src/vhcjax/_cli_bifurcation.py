@@ -52,15 +52,13 @@ def _c(ev):
 
 
 def run_multipliers(args):
-    import jax.numpy as jnp
     import numpy as np
 
     from . import _stability as S
     from ._results import result_names
 
     model = model_from_args(args)
-    fam = S.period1_family([float(model.psi)], args.family,
-                           model=S.with_slope(model, 0.0 + float(model.psi)))
+    fam = S.period1_family([float(model.psi)], args.family, model=model)
     if result_names(fam.result)[0] != "successful":
         raise CLIError(f"no {args.family} gait found at {args.slope_deg} deg")
     m = S.with_slope(model, float(model.psi))
@@ -81,7 +79,6 @@ def run_multipliers(args):
         for a, b in zip(tr, pc):
             print(f"  transverse {a:.8f}   poincare {b:.8f}")
         print("  stable" if bool(gm.stable) else "  unstable")
-    del jnp
     return 0
 
 
