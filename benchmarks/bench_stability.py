@@ -16,7 +16,6 @@ the common slopes) is reported too.
 
 import argparse
 import json
-import math
 import os
 import platform
 import sys
@@ -119,7 +118,6 @@ def main(argv=None):
     if args.json:
         with open(args.json, "w") as f:
             json.dump(res, f, indent=2)
-    del math
     return res
 
 
