@@ -526,3 +526,15 @@ def stability_csv_row(gm, index=None):
         row += [float(e.real), float(e.imag)]
     mx = float(np.max(np.abs(tr)))
     return row + [mx, bool(mx < 1.0)]
+
+
+def add_stability_columns(model, gaits, psis, rows):
+    """Add the `CSV_COLUMNS` values to sweep rows (dicts) of a batched `Gait`, from one
+    batched `family_multipliers` call; rows whose gait failed get empty values."""
+    z = jax.vmap(model.state_to_section)(jnp.asarray(gaits.x_plus))
+    gm = family_multipliers(model, jnp.asarray(psis, float), z)
+    ok = np.asarray(gm.result._value) == 0
+    for i, row in enumerate(rows):
+        good = ok[i] and row.get("result") == "successful"
+        vals = stability_csv_row(gm, i) if good else [""] * len(CSV_COLUMNS)
+        row.update(dict(zip(CSV_COLUMNS, vals)))
