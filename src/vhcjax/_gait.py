@@ -156,16 +156,25 @@ def quadratic_coefficients(model, a, b):
     return 0.5 * (fp + fm) - f0, 0.5 * (fp - fm), f0
 
 
+def family_sign(family):
+    """The sign in front of the square root of (5.13): `"stable"` -> -1 (thesis selector
+    2, 7.3), `"unstable"` -> +1 (selector 1, 7.8). Arrays pass through (traced signs let
+    both families share one compiled function)."""
+    if isinstance(family, str):
+        if family not in FAMILIES:
+            raise ValueError(f"family must be one of {FAMILIES}, got {family!r}")
+        return jnp.asarray(-1.0 if family == "stable" else 1.0)
+    return jnp.asarray(family, dtype=float)
+
+
 def solve_for_d(model, a, b, family):
     """$d$ from (5.13): `"stable"` = thesis selector 2 ($-\\sqrt{}$, 7.3), `"unstable"` =
-    selector 1 ($+\\sqrt{}$, 7.8). **Returns:** `(d, real)` where `real` is False when
-    $B^2 - 4AC < 0$ (then `d` is the real part, $-B/2A$)."""
-    if family not in FAMILIES:
-        raise ValueError(f"family must be one of {FAMILIES}, got {family!r}")
+    selector 1 ($+\\sqrt{}$, 7.8); `family` may also be that sign. **Returns:** `(d, real)`
+    where `real` is False when $B^2 - 4AC < 0$ (then `d` is the vertex $-B/2A$)."""
+    sign = family_sign(family)
     A, B, C = quadratic_coefficients(model, a, b)
     disc = B**2 - 4 * A * C
     root = jnp.sqrt(jnp.maximum(disc, 0.0))
-    sign = -1.0 if family == "stable" else 1.0
     return (-B + sign * root) / (2 * A), disc >= 0
 
 
@@ -252,12 +261,17 @@ def _boundary_abd(model, a, b, d, real=True, config=VHC_CONFIG):
     return BoundaryData(x_plus, x_minus, E0, yc[:2], yc[2], residual, code)
 
 
+def _vhc_eval(model, ab, family, config=VHC_CONFIG):
+    bd = vhc_boundary(model, ab, family, config)
+    r = jnp.where(bd.result == RESULTS.successful, bd.residual, 1e3 * jnp.ones(2))
+    return r, bd
+
+
 def vhc_residual(model, ab, family, config=VHC_CONFIG):
     """The residual vector of Problem 1, $(\\phi(c) - g, \\phi'(c) - h/d)$ (5.20); a large
     constant where it is undefined (no real root, singular ODE), so Newton cannot stop
     there."""
-    bd = vhc_boundary(model, ab, family, config)
-    return jnp.where(bd.result == RESULTS.successful, bd.residual, 1e3 * jnp.ones(2))
+    return _vhc_eval(model, ab, family, config)[0]
 
 
 # ---------------------------------------------------------------------------------------
@@ -293,10 +307,9 @@ def _make_gait(model, x_plus, x_minus, T, E0, iterations, residual, code, family
     )
 
 
-def _finish_vhc(model, ab, iterations, solver_ok, family, method="vhc", config=VHC_CONFIG):
-    bd = vhc_boundary(model, ab, family, config)
+def _finish_vhc(model, bd, iterations, solver_ok, family, config=VHC_CONFIG):
     res = jnp.max(jnp.abs(bd.residual))
-    converged = solver_ok & (res < SUCCESS_TOL) & jnp.isfinite(ab).all()
+    converged = solver_ok & (res < SUCCESS_TOL)
     code = RESULTS.where(
         bd.result != RESULTS.successful,
         bd.result,
@@ -304,7 +317,7 @@ def _finish_vhc(model, ab, iterations, solver_ok, family, method="vhc", config=V
     )
     res = jnp.where(bd.result == RESULTS.successful, res, jnp.inf)
     return _make_gait(
-        model, bd.x_plus, bd.x_minus, bd.T, bd.E0, iterations, res, code, family, method
+        model, bd.x_plus, bd.x_minus, bd.T, bd.E0, iterations, res, code, _label(family), "vhc"
     )
 
 
@@ -332,16 +345,12 @@ def vhc_search(
     ab0 = jnp.asarray(guess, dtype=float)[:2]
     res_fn = lambda ab: vhc_residual(model, ab, family, config)  # noqa: E731
     if solver == "newton":
-        ab, iters, _ = damped_newton(res_fn, ab0, rtol=rtol, atol=atol, max_steps=max_steps)
-        # Rescue: Levenberg-Marquardt from the seed where Newton stalled (it does from the
-        # thesis seed (7.2) for the unstable family, whose gait lies near the region where
-        # (5.13) has no real root). From a converged point LM stops after one step, so
-        # a batch pays little for it when every member converged.
-        ok = jnp.max(jnp.abs(res_fn(ab))) < SUCCESS_TOL
-        ab_lm, it_lm = _levenberg_marquardt(res_fn, jnp.where(ok, ab, ab0), rtol, atol, 4 * max_steps)
-        ab = jnp.where(ok, ab, ab_lm)
-        iters = iters + jnp.where(ok, 0, it_lm)
-    elif solver == "lm":
+        ab, _, bd, iters = damped_newton(
+            lambda x: _vhc_eval(model, x, family, config), ab0,
+            rtol=rtol, atol=atol, max_steps=max_steps,
+        )
+        return _finish_vhc(model, bd, iters, jnp.isfinite(ab).all(), family, config)
+    if solver == "lm":
         ab, iters = _levenberg_marquardt(res_fn, ab0, rtol, atol, 4 * max_steps)
     elif solver == "optimistix":
         sol = optx.root_find(
@@ -355,58 +364,74 @@ def vhc_search(
         raise ValueError(f"solver must be 'newton', 'lm', 'optimistix' or 'optax', got {solver!r}")
     finite = jnp.isfinite(ab).all()
     ab = jnp.where(finite, ab, ab0)
-    return _finish_vhc(model, ab, iters, finite, family, "vhc", config)
+    bd = vhc_boundary(model, ab, family, config)
+    return _finish_vhc(model, bd, iters, finite, family, config)
 
 
-def damped_newton(residual, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_halvings=8):
-    """Newton's method with a forward-mode Jacobian (`jax.linearize` + dense solve) and a
-    backtracking line search on $\|r\|_2$ (halving the step up to `max_halvings` times
-    until the residual decreases); the full step is taken when it decreases the
-    residual, so near a solution this is plain Newton (quadratic convergence). Stops when
-    $\|\Delta x\|_\infty < \mathrm{atol} + \mathrm{rtol}\|x\|_\infty$ or $\|r\|_\infty < \mathrm{atol}$.
+def _label(family):
+    return family if isinstance(family, str) else ""
 
-    **Returns:** `(x, iterations, stopped)`.
+
+def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10):
+    r"""Newton's method with a forward-mode Jacobian (`jax.linearize`), globalised by
+    Levenberg-Marquardt damping.
+
+    `fn(x) -> (r, aux)`. Each iteration first tries the full Newton step
+    ($\lambda = 0$); if it does not decrease $\|r\|_2$ it retries with
+    $(J^TJ + \lambda I)\Delta x = J^Tr$ and growing $\lambda$ (no new Jacobian), up to
+    `max_trials` times. Near a solution this is plain Newton (quadratic convergence); far
+    from it the damped steps turn toward steepest descent, which lets the VHC search
+    leave the edge of the region where (5.13) has real roots (plain Newton stalls there
+    from the thesis seed (7.2) for the unstable family). Stops when
+    $\|\Delta x\|_\infty < \mathrm{atol} + \mathrm{rtol}\|x\|_\infty$,
+    $\|r\|_\infty < \mathrm{atol}$, or no trial decreases the residual.
+
+    **Returns:** `(x, r, aux, iterations)` at the last iterate.
     """
-
-    def jac(x):
-        r, lin = jax.linearize(residual, x)
-        return r, jax.vmap(lin, out_axes=1)(jnp.eye(x.shape[0], dtype=x.dtype))
+    n = x0.shape[0]
+    eye = jnp.eye(n, dtype=x0.dtype)
+    r_shape, aux_shape = jax.eval_shape(fn, x0)
+    zeros = lambda t: jax.tree_util.tree_map(lambda l: jnp.zeros(l.shape, l.dtype), t)  # noqa: E731
 
     def cond(carry):
-        _, _, k, done = carry
-        return (k < max_steps) & ~done
+        return (carry[4] < max_steps) & ~carry[5]
 
     def body(carry):
-        x, r, k, _ = carry
-        _, J = jac(x)
-        dx = jnp.linalg.solve(J, r)
-        dx = jnp.where(jnp.isfinite(dx).all(), dx, jnp.zeros_like(dx))
+        x, _, _, lam_prev, k, _ = carry
+        r, lin, aux = jax.linearize(fn, x, has_aux=True)
+        J = jax.vmap(lin, out_axes=1)(eye)
+        JtJ, Jtr = J.T @ J, J.T @ r
         n0 = jnp.sum(r**2)
+        lam_start = jnp.maximum(lam_prev, 1e-3 * jnp.max(jnp.diag(JtJ)))
 
-        def ls_cond(c):
-            alpha, rn, j = c
-            return (j < max_halvings) & ~(jnp.sum(rn**2) < n0)
+        def t_cond(c):
+            j, _, rn, _ = c
+            return (j == 0) | ((j < max_trials) & ~(jnp.sum(rn**2) < n0))
 
-        def ls_body(c):
-            alpha, _, j = c
-            alpha = 0.5 * alpha
-            return alpha, residual(x - alpha * dx), j + 1
+        def t_body(c):
+            j = c[0]
+            lam = jnp.where(j == 0, 0.0, lam_start * 10.0 ** (j - 1))
+            A = jnp.where(j == 0, J, JtJ + lam * eye)
+            dx = jnp.linalg.solve(A, jnp.where(j == 0, r, Jtr))
+            dx = jnp.where(jnp.isfinite(dx).all(), dx, jnp.zeros_like(dx))
+            rn, auxn = fn(x - dx)
+            return j + 1, dx, rn, auxn
 
-        alpha, r_new, _ = jax.lax.while_loop(
-            ls_cond, ls_body, (jnp.asarray(1.0), residual(x - dx), jnp.array(0))
+        j, dx, r_new, aux_new = jax.lax.while_loop(
+            t_cond, t_body, (jnp.array(0), jnp.zeros_like(x), r, aux)
         )
-        improved = jnp.sum(r_new**2) < n0
-        x_new = jnp.where(improved, x - alpha * dx, x)
-        r_new = jnp.where(improved, r_new, r)
-        small = jnp.max(jnp.abs(alpha * dx)) < atol + rtol * jnp.max(jnp.abs(x))
+        improved = jnp.isfinite(r_new).all() & (jnp.sum(r_new**2) < n0)
+        pick = lambda u, v: jax.tree_util.tree_map(lambda p, q: jnp.where(improved, p, q), u, v)  # noqa: E731
+        x_new, r_new, aux_new = pick(x - dx, x), pick(r_new, r), pick(aux_new, aux)
+        lam_used = jnp.where(j <= 1, 0.0, lam_start * 10.0 ** (j - 2))
+        small = jnp.max(jnp.abs(dx)) < atol + rtol * jnp.max(jnp.abs(x))
         done = ~improved | small | (jnp.max(jnp.abs(r_new)) < atol)
-        return x_new, r_new, k + 1, done
+        return x_new, r_new, aux_new, 0.1 * lam_used, k + 1, done
 
-    r0 = residual(x0)
-    x, _, k, done = jax.lax.while_loop(
-        cond, body, (x0, r0, jnp.array(0), jnp.max(jnp.abs(r0)) < atol)
-    )
-    return x, k, done
+    init = (x0, zeros(r_shape), zeros(aux_shape), jnp.asarray(0.0, x0.dtype), jnp.array(0),
+            jnp.asarray(False))
+    x, r, aux, _, k, _ = jax.lax.while_loop(cond, body, init)
+    return x, r, aux, k
 
 
 def _levenberg_marquardt(residual, x0, rtol, atol, max_steps):
@@ -464,57 +489,223 @@ def complete_guess(model, ab, family="stable"):
     return jnp.stack([ab[0], ab[1], f])
 
 
+def _shoot_eval(model, z, config=DEFAULT_CONFIG):
+    sr = _step(model, model.section_to_state(z), config)
+    r = model.state_to_section(sr.x_plus) - z
+    return jnp.where(sr.result == RESULTS.successful, r, 1e3 * jnp.ones_like(r)), sr
+
+
 def shooting_search(
-    model, guess, family="stable", *, rtol=1e-12, atol=1e-12, max_steps=40,
+    model, guess, family="stable", *, solver="newton", rtol=1e-12, atol=1e-12, max_steps=40,
     config=DEFAULT_CONFIG,
 ):
-    """Solve Problem 2 (fixed point of the step-to-step map) from `guess` (pure).
+    """Solve Problem 2, $P(z) = z$ for the step-to-step map $P$ on the post-impact section
+    (`vhcjax._poincare.step_map`), from `guess` (pure; never raises).
 
     `guess` is $(a_0, b_0, f_0)$ on the post-impact section, or $(a_0, b_0)$ completed by
-    `complete_guess` with the `family` root. The `family` label of the result is checked:
+    `complete_guess` with the `family` root. `solver="newton"` uses `damped_newton`
+    (forward-mode Jacobian through the heel-strike event); `"optimistix"` uses
+    `vhcjax._poincare.fixed_point` (plain `optx.Newton`). The `family` label is checked:
     a fixed point whose $d$ is the other root of (5.13) gets `RESULTS.other_cycle`.
 
     **Returns:** a `Gait` (`method="shooting"`).
     """
     guess = jnp.asarray(guess, dtype=float)
     z0 = guess if guess.shape[-1] == 3 else complete_guess(model, guess, family)
-    fp = _poincare.fixed_point(
-        model, z0, 1, rtol=rtol, atol=atol, max_steps=max_steps, config=config
-    )
-    sr = _step(model, fp.x0, config)
-    x_plus, x_minus = fp.x0, sr.x_minus
+    if solver == "newton":
+        z, r, sr, iters = damped_newton(
+            lambda zz: _shoot_eval(model, zz, config), z0,
+            rtol=rtol, atol=atol, max_steps=max_steps,
+        )
+        res = jnp.max(jnp.abs(r))
+        ok = (sr.result == RESULTS.successful) & jnp.isfinite(z).all()
+        code = RESULTS.where(
+            sr.result != RESULTS.successful,
+            sr.result,
+            RESULTS.where(ok & (res < SUCCESS_TOL), RESULTS.successful, RESULTS.not_converged),
+        )
+        x_plus, x_minus, T = model.section_to_state(z), sr.x_minus, sr.period
+    elif solver == "optimistix":
+        fp = _poincare.fixed_point(
+            model, z0, 1, rtol=rtol, atol=atol, max_steps=max_steps, config=config
+        )
+        sr = _step(model, fp.x0, config)
+        x_plus, x_minus, T, iters, res, code = (
+            fp.x0, sr.x_minus, fp.periods[0], fp.iterations, fp.residual, fp.result
+        )
+    else:
+        raise ValueError(f"solver must be 'newton' or 'optimistix' for shooting, got {solver!r}")
     E0 = model.energy(x_plus)
     # Which root of the energy quadratic is this gait's d?
     n = model.n_dof
     a, b = x_plus[0], x_plus[n]
-    d_fam, _ = solve_for_d(model, a, b, family)
-    other = "unstable" if family == "stable" else "stable"
-    d_oth, _ = solve_for_d(model, a, b, other)
+    sign = family_sign(family)
+    d_fam, _ = solve_for_d(model, a, b, sign)
+    d_oth, _ = solve_for_d(model, a, b, -sign)
     d = x_minus[n]
     wrong = jnp.abs(d - d_oth) < jnp.abs(d - d_fam)
-    code = RESULTS.where(
-        (fp.result == RESULTS.successful) & wrong, RESULTS.other_cycle, fp.result
-    )
+    code = RESULTS.where((code == RESULTS.successful) & wrong, RESULTS.other_cycle, code)
     return _make_gait(
-        model, x_plus, x_minus, fp.periods[0], E0, fp.iterations, fp.residual, code,
-        family, "shooting",
+        model, x_plus, x_minus, T, E0, iters, res, code, _label(family), "shooting"
     )
 
 
-def _search(model, guess, family, method, solver="newton"):
+def _search(model, guess, sign, method, solver="newton"):
     if method == "vhc":
-        return vhc_search(model, guess, family, solver=solver)
+        return vhc_search(model, guess, sign, solver=solver)
     if method == "shooting":
-        return shooting_search(model, guess, family)
+        return shooting_search(model, guess, sign, solver="optimistix" if solver == "optimistix" else "newton")
     raise ValueError(f"method must be one of {METHODS}, got {method!r}")
 
 
 _search_jit = eqx.filter_jit(_search)
 
 
+def _relabel(gait, family):
+    import dataclasses
+
+    return dataclasses.replace(gait, family=family)
+
+
+def _check(family, method):
+    if family not in FAMILIES:
+        raise ValueError(f"family must be one of {FAMILIES}, got {family!r}")
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+
+
+def reference_model(like=None):
+    """The default model (thesis Table 1) at 3 degrees, where `reference_guess` holds."""
+    from ._compass_gait import CompassGait
+
+    return CompassGait(psi=_REFERENCE_PSI)
+
+
 def reference_guess(family="stable"):
     """$(a, b)$ of the `family` gait of the default model at 3 degrees (a seed)."""
     return jnp.asarray(_REFERENCE_AB[family])
+
+
+# ---------------------------------------------------------------------------------------
+# Continuation (homotopy in the parameters; sweeps in the slope)
+# ---------------------------------------------------------------------------------------
+_HOMOTOPY_LEAVES = ("m1", "m2", "mH", "a", "b", "g", "psi")
+
+
+def _unknowns(gait, method):
+    return jnp.stack([gait.a, gait.b]) if method == "vhc" else jnp.stack([gait.a, gait.b, gait.f])
+
+
+def _residual(model, z, sign, method):
+    if method == "vhc":
+        return vhc_residual(model, z, sign)
+    return _shoot_eval(model, z)[0]
+
+
+def _tangent(path, s, z, sign, method):
+    r"""$dz^*/ds = -(\partial r/\partial z)^{-1}\,\partial r/\partial s$ along `path(s)` (implicit
+    differentiation of the residual; one forward-mode Jacobian in $(z, s)$)."""
+    k = z.shape[0]
+    J = jax.jacfwd(lambda w: _residual(path(w[k]), w[:k], sign, method))(
+        jnp.concatenate([z, jnp.asarray(s, z.dtype)[None]])
+    )
+    t = -jnp.linalg.solve(J[:, :k], J[:, k])
+    return jnp.where(jnp.isfinite(t).all(), t, jnp.zeros_like(t))
+
+
+def _path(start, end):
+    r"""$s \mapsto$ model with every physical leaf interpolated geometrically (they are
+    positive) from `start` (s = 0) to `end` (s = 1); `s` may leave [0, 1]."""
+
+    def path(s):
+        m = end
+        for name in _HOMOTOPY_LEAVES:
+            p0 = jnp.asarray(getattr(start, name), dtype=float)
+            p1 = jnp.asarray(getattr(end, name), dtype=float)
+            m = eqx.tree_at(lambda mm: getattr(mm, name), m, p0 * (p1 / p0) ** s)
+        return m
+
+    return path
+
+
+def _continue(start, end, s_buf, n, z0, sign, method):
+    """Follow the solution of the model `_path(start, end)(s)` through `s_buf[:n]`
+    (a `fori_loop` with a dynamic length over a fixed-size buffer), from the seed `z0` at
+    `s_buf[0]`, with a tangent predictor. A failed point does not move the anchor: the
+    next one is predicted from the last success.
+
+    **Returns:** a batched `Gait` (one per buffer entry; entries from `n` on are unset)
+    and the tangents $dz^*/ds$ (zero where the search failed).
+    """
+    path = _path(start, end)
+    s0 = s_buf[0]
+    t0 = _tangent(path, s0, z0, sign, method)
+    shape = jax.eval_shape(lambda: _search(path(s0), z0, sign, method))
+    buf = jax.tree_util.tree_map(lambda l: jnp.zeros((s_buf.shape[0],) + l.shape, l.dtype), shape)
+    tbuf = jnp.zeros((s_buf.shape[0], z0.shape[0]), z0.dtype)
+
+    def body(i, carry):
+        s_good, z_good, t_good, buf, tbuf = carry
+        s = s_buf[i]
+        gait = _search(path(s), z_good + t_good * (s - s_good), sign, method)
+        ok = gait.result == RESULTS.successful
+        z_new = _unknowns(gait, method)
+        t_new = _tangent(path, s, z_new, sign, method)
+        ok_t = ok & jnp.any(t_new != 0)
+        buf = jax.tree_util.tree_map(lambda b, v: b.at[i].set(v), buf, gait)
+        tbuf = tbuf.at[i].set(jnp.where(ok, t_new, 0.0))
+        return (
+            jnp.where(ok, s, s_good), jnp.where(ok, z_new, z_good),
+            jnp.where(ok_t, t_new, t_good), buf, tbuf,
+        )
+
+    init = (s0, z0, t0, buf, tbuf)
+    _, _, _, buf, tbuf = jax.lax.fori_loop(0, n, body, init)
+    return buf, tbuf
+
+
+_continue_jit = eqx.filter_jit(_continue)
+
+
+def _pow2(n, lo=16):
+    return max(lo, 1 << (int(n) - 1).bit_length())
+
+
+def _run_continuation(start, end, s_values, z0, sign, method):
+    """Host wrapper: pad `s_values` to a power of two (fewer recompiles), run, unpad."""
+    import numpy as np
+
+    s_values = np.asarray(s_values, dtype=float)
+    n = len(s_values)
+    s_buf = np.concatenate([s_values, np.full(_pow2(n) - n, s_values[-1])])
+    gaits, tangents = _continue_jit(start, end, jnp.asarray(s_buf), n, z0, sign, method)
+    return jax.tree_util.tree_map(lambda x: x[:n], gaits), tangents[:n]
+
+
+_HOMOTOPY_STEPS = 16
+
+
+def _seed(sign, method):
+    ref = reference_model()
+    ab = jnp.where(sign < 0, reference_guess("stable"), reference_guess("unstable"))
+    return ab if method == "vhc" else complete_guess(ref, ab, sign)
+
+
+def continue_to_model(model, family="stable", method="vhc", num=_HOMOTOPY_STEPS):
+    """The `family` gait of `model` without a guess: homotopy from the default model at
+    3 degrees (thesis Table 1, `reference_model`) to `model`, all physical parameters at
+    once (geometric interpolation), in `num` steps with a tangent predictor.
+
+    **Returns:** a `Gait` (never raises; check `result`).
+    """
+    import numpy as np
+
+    _check(family, method)
+    sign = family_sign(family)
+    gaits, _ = _run_continuation(
+        reference_model(), model, np.linspace(0.0, 1.0, num), _seed(sign, method), sign, method
+    )
+    return _relabel(jax.tree_util.tree_map(lambda x: x[-1], gaits), family)
 
 
 def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newton", throw=True):
@@ -527,19 +718,191 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
     - `method`: `"vhc"` (Problem 1) or `"shooting"` (Problem 2).
     - `guess`: $(a_0, b_0)$ (or $(a_0, b_0, f_0)$ for shooting). `None`: continue the
       known default-model gait to `model` (homotopy in the parameters).
-    - `solver`: `"newton"` or `"optax"` (VHC only).
+    - `solver`: VHC only: `"newton"` (default), `"lm"`, `"optimistix"` or `"optax"`.
     - `throw`: raise if no gait was found.
 
     **Returns:** a `Gait`.
     """
+    _check(family, method)
     if guess is None:
-        from ._continuation import continue_to_model
-
         gait = continue_to_model(model, family, method)
     else:
-        gait = _search_jit(model, jnp.asarray(guess, dtype=float), family, method, solver)
+        guess = jnp.asarray(guess, dtype=float)
+        gait = _search_jit(model, guess, family_sign(family), method, solver)
+        gait = _relabel(gait, family)
     if throw:
-        gait = eqx.tree_at(
-            lambda g: g.a, gait, gait.result.error_if(gait.a, gait.result != RESULTS.successful)
-        )
+        err = gait.result != RESULTS.successful
+        gait = eqx.tree_at(lambda g: g.a, gait, gait.result.error_if(gait.a, err))
     return gait
+
+
+# ---------------------------------------------------------------------------------------
+# Batches
+# ---------------------------------------------------------------------------------------
+_BUCKETS = (1, 8, 64, 256, 1024)
+
+
+def _bucket(n):
+    for b in _BUCKETS:
+        if n <= b:
+            return b
+    return -(-n // _BUCKETS[-1]) * _BUCKETS[-1]
+
+
+def _batched_axes(model):
+    return jax.tree_util.tree_map(
+        lambda x: 0 if (eqx.is_array(x) and jnp.ndim(x) > 0) else None, model
+    )
+
+
+@eqx.filter_jit
+def _search_batch(model, guesses, sign, method, solver, axes):
+    return eqx.filter_vmap(
+        lambda m, g: _search(m, g, sign, method, solver), in_axes=(axes, 0)
+    )(model, guesses)
+
+
+def _from_reference(model, sign, method, num=_HOMOTOPY_STEPS):
+    s_buf = jnp.linspace(0.0, 1.0, num)
+    gaits, _ = _continue(reference_model(), model, s_buf, num, _seed(sign, method), sign, method)
+    return jax.tree_util.tree_map(lambda x: x[-1], gaits)
+
+
+@eqx.filter_jit
+def _from_reference_batch(model, sign, method, num, axes):
+    return eqx.filter_vmap(lambda m: _from_reference(m, sign, method, num), in_axes=(axes,))(model)
+
+
+def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, solver="newton"):
+    """Batched `find_gait`: `vmap` over guesses, slopes and model parameters, never raises.
+
+    **Arguments:**
+
+    - `model`: a `CompassGait`; any parameter may be an array with a leading batch axis.
+    - `guesses`: `(B, 2)` (or `(B, 3)` for shooting) seeds, or `None` for continuation
+      from the reference gait (per member).
+    - `family`, `method`, `solver`: as in `find_gait`.
+    - `psi`: optional `(B,)` slopes (rad), replacing `model.psi`.
+
+    Batches are padded to a few bucket sizes (1, 8, 64, 256, 1024, multiples of 1024)
+    with copies of the first member, so that new sizes rarely recompile.
+
+    **Returns:** a `Gait` with a leading batch axis; check `result` per member.
+    """
+    _check(family, method)
+    if psi is not None:
+        model = _with_psi(model, jnp.asarray(psi, dtype=float))
+    sizes = [jnp.shape(x)[0] for x in jax.tree_util.tree_leaves(model) if eqx.is_array(x) and jnp.ndim(x) > 0]
+    if guesses is not None:
+        guesses = jnp.atleast_2d(jnp.asarray(guesses, dtype=float))
+        sizes.append(guesses.shape[0])
+    if not sizes:
+        raise ValueError("find_gaits needs a batch: guesses, psi or batched model parameters")
+    B = max(sizes)
+    P = _bucket(B)
+
+    def pad(x):
+        x = jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])
+        return jnp.concatenate([x, jnp.broadcast_to(x[:1], (P - B,) + x.shape[1:])])
+
+    model = jax.tree_util.tree_map(
+        lambda x: pad(x) if (eqx.is_array(x) and jnp.ndim(x) > 0) else x, model
+    )
+    axes = _batched_axes(model)
+    sign = family_sign(family)
+    if guesses is None:
+        gaits = _from_reference_batch(model, sign, method, _HOMOTOPY_STEPS, axes)
+    else:
+        gaits = _search_batch(model, pad(guesses), sign, method, solver, axes)
+    gaits = jax.tree_util.tree_map(lambda x: x[:B], gaits)
+    return _relabel(gaits, family)
+
+
+# ---------------------------------------------------------------------------------------
+# Sweeps in the slope
+# ---------------------------------------------------------------------------------------
+class Sweep(eqx.Module):
+    """A gait family along a vector of slopes.
+
+    - `psi`: the slopes (rad), as given.
+    - `gaits`: a batched `Gait`, one per slope (failed members carry their code).
+    - `tangent`: $dz^*/d\\psi$ at each slope where the gait was found (for fold detection).
+    """
+
+    psi: jax.Array
+    gaits: Gait
+    tangent: jax.Array
+
+    @property
+    def ok(self):
+        return self.gaits.result == RESULTS.successful
+
+    def ends(self):
+        """Where the family stops existing or stops being found, as a list of dicts
+        `{"slope_deg", "last_slope_deg", "result", "reason"}` (host side)."""
+        import numpy as np
+
+        from ._results import result_names
+
+        ok = np.asarray(self.ok)
+        names = result_names(self.gaits.result)
+        names = [names] if isinstance(names, str) else names
+        deg = np.degrees(np.asarray(self.psi))
+        tan = np.abs(np.asarray(self.tangent)).max(axis=-1) if ok.any() else None
+        out = []
+        for i in range(len(ok)):
+            if ok[i]:
+                continue
+            prev = i - 1 if i > 0 and ok[i - 1] else (i + 1 if i + 1 < len(ok) and ok[i + 1] else None)
+            if prev is None:
+                continue
+            reason = {
+                "no_real_root": "the energy quadratic (5.13) has no real root for d",
+                "singular_phi_ode": "the phi'' ODE becomes singular along the arc",
+                "infeasible_uphill": "the solution turned into an uphill (negative-time) one",
+            }.get(names[i], names[i])
+            if names[i] == "not_converged" and tan is not None and tan[prev] > 50:
+                reason = f"fold: |dz*/dpsi| = {tan[prev]:.3g} at the last gait found"
+            out.append(
+                {"slope_deg": float(deg[i]), "last_slope_deg": float(deg[prev]),
+                 "result": names[i], "reason": reason}
+            )
+        return out
+
+
+def sweep(model, slopes, family="stable", method="vhc"):
+    """The `family` gait along the slopes `slopes` (rad) by continuation.
+
+    Starts at the slope closest to 3 degrees (reached from the reference gait by
+    homotopy in the model parameters, so no guess is needed), then follows the family
+    up and down the slope vector with a tangent predictor ($dz^*/d\\psi$ by implicit
+    differentiation), each direction one jitted loop. Slopes where the family is not
+    found keep their failure code; the next slope is predicted from the last success,
+    so an isolated failure does not end the sweep. `Sweep.ends()` says where and why
+    the family ends. Give the slopes in order (increasing or decreasing).
+
+    **Returns:** a `Sweep` (`tangent` is $dz^*/d\\psi$).
+    """
+    import numpy as np
+
+    _check(family, method)
+    psi = np.asarray(slopes, dtype=float).reshape(-1)
+    k = int(np.argmin(np.abs(psi - _REFERENCE_PSI)))
+    sign = family_sign(family)
+    anchor_model = _with_psi(model, psi[k])
+    anchor = continue_to_model(anchor_model, family, method)
+    z0 = _unknowns(anchor, method)
+    # Slope path psi = psi_k * e^s: s = log(psi / psi_k).
+    end = _with_psi(model, psi[k] * math.e)
+    up, t_up = _run_continuation(anchor_model, end, np.log(psi[k:] / psi[k]), z0, sign, method)
+    parts, tans = [up], [t_up]
+    if k > 0:
+        down, t_down = _run_continuation(
+            anchor_model, end, np.log(psi[k::-1] / psi[k]), z0, sign, method
+        )
+        rev = jax.tree_util.tree_map(lambda x: x[1:][::-1], down)
+        parts, tans = [rev, up], [t_down[1:][::-1], t_up]
+    gaits = jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
+    # d/dpsi = (d/ds) / psi on this path.
+    tangent = jnp.concatenate(tans) / jnp.asarray(psi)[:, None]
+    return Sweep(jnp.asarray(psi), _relabel(gaits, family), tangent)

@@ -1,0 +1,66 @@
+"""`vhcjax gait` / `vhcjax sweep`: JSON schema, values, CSV/PNG output, errors."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+import vhcjax as vj
+from vhcjax import _gait
+from vhcjax.cli import main
+
+
+def test_gait_json(capsys):
+    rc = main(["gait", "--slope-deg", "3", "--family", "stable", "--method", "vhc",
+               "--guess", "0.2", "-1.0", "--json"])
+    out = json.loads(capsys.readouterr().out)
+    assert rc == 0
+    assert set(out) == {"result", "slope_deg", "family", "method", "x0", "params",
+                        "iterations", "residual"}
+    assert out["result"] == "successful" and out["family"] == "stable" and out["method"] == "vhc"
+    assert set(out["params"]) == set("abcdefgh") | {"T", "E0"}
+    g = _gait.find_gait(vj.CompassGait(), "stable", guess=(0.2, -1.0))
+    np.testing.assert_allclose(out["x0"], np.asarray(g.x_plus), atol=1e-14)
+    # x0 is (a, e, b, f) and the thesis (7.5) to its printed digits
+    p = out["params"]
+    assert out["x0"] == [p["a"], p["e"], p["b"], p["f"]]
+    np.testing.assert_allclose(out["x0"][:2], [0.218669, -0.323389], atol=6e-7)
+
+
+@pytest.mark.parametrize("argv,msg", [
+    (["gait", "--slope-deg", "40"], "--slope-deg"),
+    (["gait", "--slope-deg", "nan"], "--slope-deg"),
+    (["gait", "--mass-hip", "-1"], "--mass-hip"),
+    (["gait", "--guess", "nan", "1"], "--guess"),
+    (["sweep", "--slope-deg", "1:0.5:0.1"], "--slope-deg"),
+    (["sweep", "--slope-deg", "1:2"], "--slope-deg"),
+    (["sweep", "--slope-deg", "0:2:1"], "--slope-deg"),
+])
+def test_errors_are_one_line(capsys, argv, msg):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert msg in err and "\n" not in err
+
+
+def test_bad_choice_exits_2():
+    with pytest.raises(SystemExit) as e:
+        main(["gait", "--family", "sideways"])
+    assert e.value.code == 2
+
+
+@pytest.mark.slow
+def test_sweep_csv_png(tmp_path, capsys):
+    csv_path, png_path = tmp_path / "s.csv", tmp_path / "s.png"
+    rc = main(["sweep", "--slope-deg", "2.5:3.5:0.5", "--family", "both",
+               "--csv", str(csv_path), "--png", str(png_path)])
+    assert rc == 0
+    rows = list(csv.DictReader(open(csv_path)))
+    assert len(rows) == 6
+    assert list(rows[0])[1:] == ["slope_deg", "result", "a", "b", "c", "d", "e", "f", "g", "h",
+                                 "T", "E0", "step_length", "speed"]
+    assert all(r["result"] == "successful" for r in rows)
+    r3 = [r for r in rows if r["family"] == "unstable" and float(r["slope_deg"]) == 3.0][0]
+    np.testing.assert_allclose(float(r3["a"]), 0.204676, atol=6e-7)  # thesis (7.9)
+    assert png_path.stat().st_size > 10_000
+    assert "found at 3 of 3" in capsys.readouterr().out

@@ -1,0 +1,198 @@
+"""Gait search: VHC (Problem 1) vs shooting (Problem 2) vs the hybrid simulator, thesis
+(7.4), (7.9) and (7.18), batches, Jacobians, continuation."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import vhcjax as vj
+from vhcjax import _gait
+
+SEED = (0.20, -1.0)  # thesis (7.2)
+SLOPES_DEG = (2.0, 3.0, 4.0)
+
+
+@pytest.fixture(scope="module")
+def gaits():
+    """VHC and shooting gaits, both families, at several slopes. VHC starts from the thesis
+    seed (7.2). Shooting starts from (a0, b0) completed algebraically to (a0, b0, f0) (no
+    VHC integration involved): the thesis seed for the stable family; for the unstable
+    family, from the thesis seed Newton on the step map lands on the stable gait (flagged
+    `other_cycle`, tested below), so it starts from the 3-degree (a, b) of the unstable
+    gait (thesis 7.9, rounded to 3 digits)."""
+    out = {}
+    for deg in SLOPES_DEG:
+        m = vj.CompassGait(psi=math.radians(deg))
+        for fam in ("stable", "unstable"):
+            out[deg, fam, "vhc"] = _gait.find_gait(m, fam, "vhc", guess=SEED, throw=False)
+            seed = SEED if fam == "stable" else (0.205, -1.211)
+            out[deg, fam, "shooting"] = _gait.find_gait(m, fam, "shooting", guess=seed, throw=False)
+    return out
+
+
+def test_shooting_from_thesis_seed_unstable_is_flagged():
+    """Shooting from the thesis seed with the unstable completion converges to the stable
+    gait; it is labelled `other_cycle`, not returned as the unstable gait."""
+    m = vj.CompassGait(psi=math.radians(2.0))
+    s = _gait.find_gait(m, "unstable", "shooting", guess=SEED, throw=False)
+    assert vj.result_names(s.result) == "other_cycle"
+
+
+@pytest.mark.parametrize("deg", SLOPES_DEG)
+@pytest.mark.parametrize("fam", ["stable", "unstable"])
+def test_vhc_equals_shooting(gaits, deg, fam):
+    v, s = gaits[deg, fam, "vhc"], gaits[deg, fam, "shooting"]
+    assert vj.result_names(v.result) == "successful"
+    assert vj.result_names(s.result) == "successful"
+    assert float(v.residual) < 1e-10 and float(s.residual) < 1e-10
+    np.testing.assert_allclose(np.asarray(v.x_plus), np.asarray(s.x_plus), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(v.x_minus), np.asarray(s.x_minus), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(float(v.T), float(s.T), rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("deg", SLOPES_DEG)
+@pytest.mark.parametrize("fam", ["stable", "unstable"])
+def test_vhc_gait_is_a_fixed_point_of_the_hybrid_simulation(gaits, deg, fam):
+    """One step of the hybrid simulator (diffrax event, time domain) from the VHC gait's
+    post-impact state returns to it; pre-impact state and period match too."""
+    g = gaits[deg, fam, "vhc"]
+    m = vj.CompassGait(psi=math.radians(deg))
+    sim = vj.simulate(m, g.x_plus, 1)
+    assert vj.result_names(sim.result) == "successful"
+    np.testing.assert_allclose(np.asarray(sim.steps.x_plus[0]), np.asarray(g.x_plus), atol=1e-9)
+    np.testing.assert_allclose(np.asarray(sim.steps.x_minus[0]), np.asarray(g.x_minus), atol=1e-9)
+    np.testing.assert_allclose(float(sim.steps.period[0]), float(g.T), atol=1e-9)
+
+
+@pytest.mark.parametrize("deg", SLOPES_DEG)
+def test_energy_bookkeeping(gaits, deg):
+    """Energy lost in the impact (kinetic, from the states) equals the potential energy
+    released per step, m_total g (step length) sin(psi); E0 equals the model energy."""
+    m = vj.CompassGait(psi=math.radians(deg))
+    mt = float(m.m1 + m.m2 + m.mH)
+    for fam in ("stable", "unstable"):
+        g = gaits[deg, fam, "vhc"]
+        drop = mt * float(m.g) * float(g.step_length) * math.sin(float(m.psi))
+        np.testing.assert_allclose(float(g.energy_loss), drop, rtol=1e-9)
+        # Step length from the leg geometry: 2 l sin((g - c)/2).
+        np.testing.assert_allclose(float(g.step_length), 2 * float(m.l) * math.sin((float(g.g) - float(g.c)) / 2), rtol=1e-12)
+        np.testing.assert_allclose(float(g.speed), float(g.step_length) / float(g.T), rtol=1e-14)
+
+
+# Thesis values and how far (in units of the last printed digit) the thesis is from ours.
+THESIS_7_4 = dict(a=(0.218669, 0), b=(-1.092386, 2), c=(-0.323389, 0), d=(-1.494206, 1),
+                  e=(-0.323389, 0), f=(-0.377377, 3), g=(0.218669, 0), h=(-1.805654, 25))
+THESIS_7_9 = dict(a=(0.204676, 0), b=(-1.210571, 1), c=(-0.309396, 1), d=(-1.395725, 3),
+                  e=(-0.309396, 1), f=(-0.712484, 5), g=(0.204676, 0), h=(-0.087282, 18))
+
+
+@pytest.mark.parametrize("fam,table", [("stable", THESIS_7_4), ("unstable", THESIS_7_9)])
+def test_thesis_gaits_reproduced(gaits, fam, table):
+    """Thesis (7.4)/(7.9) to the printed 6 decimals. Entries with a nonzero allowance are
+    off in the last printed digit(s) by at most that many units; the VHC and shooting
+    gaits agree to 1e-9 (test above), so the thesis digits are the less accurate ones
+    (fminsearch, ode45 with abstol 1e-6)."""
+    g = gaits[3.0, fam, "vhc"]
+    for k, (want, ulps) in table.items():
+        got = float(getattr(g, k))
+        err = abs(round(got, 6) - want)
+        assert err <= (ulps + 0.5) * 1e-6, (k, got, want)
+        if ulps > 0:  # the allowance is needed: the digit really is off
+            assert err >= (ulps - 0.5) * 1e-6, (k, got, want)
+
+
+def test_period_matches_thesis_figure(gaits):
+    """Thesis Fig. 7.4 text: T ~ 0.735 s for the stable gait at 3 degrees."""
+    assert abs(float(gaits[3.0, "stable", "vhc"].T) - 0.735) < 1e-3
+
+
+def test_uphill_solution_is_found_and_flagged():
+    """Thesis (7.17)-(7.18): seed (0.20, +1.0), minus sign, 3 degrees: a solution of
+    Problem 1 with positive velocities (the unstable gait run backwards in time)."""
+    m = vj.CompassGait()
+    g = _gait.find_gait(m, "stable", guess=(0.20, 1.0), throw=False)
+    assert vj.result_names(g.result) == "infeasible_uphill"
+    assert float(g.residual) < 1e-10
+    assert float(g.T) < 0
+    # (7.18): q1 = 0.204676, q2 = -0.309396, dq1 = 1.210571, dq2 = 0.712484
+    np.testing.assert_allclose(np.asarray(g.x_plus), [0.204676, -0.309396, 1.210571, 0.712484],
+                               atol=6e-6)
+    with pytest.raises(Exception):
+        _gait.find_gait(m, "stable", guess=(0.20, 1.0), throw=True).a.block_until_ready()
+
+
+def test_batch_equals_unbatched_and_flags_hopeless(gaits):
+    m = vj.CompassGait()
+    guesses = jnp.array([[0.20, -1.0], [0.23, -1.15], [2.5, 8.0], [0.2, 0.0]])
+    psi = jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0]))
+    b = _gait.find_gaits(m, guesses, "stable", psi=psi)
+    names = vj.result_names(b.result)
+    assert names[:2] == ["successful", "successful"]
+    assert names[2] != "successful" and names[3] != "successful"
+    np.testing.assert_allclose(np.asarray(b.x_plus[0]), np.asarray(gaits[3.0, "stable", "vhc"].x_plus), atol=1e-12)
+    np.testing.assert_allclose(np.asarray(b.x_plus[1]), np.asarray(gaits[2.0, "stable", "vhc"].x_plus), atol=1e-10)
+    assert np.all(np.isfinite(np.asarray(b.x_plus)))  # never a silent NaN
+
+
+def test_batch_over_model_parameters():
+    masses = jnp.array([10.0, 12.0])
+    m = vj.CompassGait(mH=masses)
+    b = _gait.find_gaits(m, jnp.array([SEED, SEED]), "stable")
+    assert vj.result_names(b.result) == ["successful", "successful"]
+    one = _gait.find_gait(vj.CompassGait(mH=12.0), "stable", guess=SEED)
+    np.testing.assert_allclose(np.asarray(b.x_plus[1]), np.asarray(one.x_plus), atol=1e-10)
+
+
+@pytest.mark.parametrize("fam", ["stable", "unstable"])
+def test_newton_jacobians_match_finite_differences(gaits, fam):
+    m = vj.CompassGait()
+    g = gaits[3.0, fam, "vhc"]
+    sign = _gait.family_sign(fam)
+    for ab in (jnp.stack([g.a, g.b]), jnp.stack([g.a, g.b]) + jnp.array([0.004, -0.01])):
+        r = jax.jit(lambda x: _gait.vhc_residual(m, x, sign))
+        J = np.asarray(jax.jit(jax.jacfwd(lambda x: _gait.vhc_residual(m, x, sign)))(ab))
+        h = 1e-6
+        fd = np.stack([(np.asarray(r(ab + h * e)) - np.asarray(r(ab - h * e))) / (2 * h)
+                       for e in np.eye(2)], axis=1)
+        np.testing.assert_allclose(J, fd, rtol=1e-5, atol=1e-6)
+    z = g.z
+    r = jax.jit(lambda x: _gait._shoot_eval(m, x)[0])
+    J = np.asarray(jax.jit(jax.jacfwd(lambda x: _gait._shoot_eval(m, x)[0]))(z))
+    h = 1e-5
+    fd = np.stack([(np.asarray(r(z + h * e)) - np.asarray(r(z - h * e))) / (2 * h)
+                   for e in np.eye(3)], axis=1)
+    np.testing.assert_allclose(J, fd, rtol=1e-4, atol=1e-5)
+
+
+def test_bad_input_and_labels():
+    g = _gait.find_gait(vj.CompassGait(mH=-1.0), "stable", guess=SEED, throw=False)
+    assert vj.result_names(g.result) == "bad_input"
+    with pytest.raises(ValueError):
+        _gait.find_gait(vj.CompassGait(), "sideways", guess=SEED)
+    with pytest.raises(ValueError):
+        _gait.find_gait(vj.CompassGait(), "stable", "magic", guess=SEED)
+
+
+@pytest.mark.slow
+def test_no_guess_other_models_and_sweep():
+    """Without a guess: other masses, lengths, gravity and slope, both families; each
+    gait checked by the hybrid simulator. Then a short sweep that crosses 3 degrees."""
+    m = vj.CompassGait(m1=4.0, m2=4.0, mH=12.0, a=0.45, b=0.6, g=9.0, psi=math.radians(2.0))
+    for fam in ("stable", "unstable"):
+        g = _gait.find_gait(m, fam)
+        sim = vj.simulate(m, g.x_plus, 1)
+        np.testing.assert_allclose(np.asarray(sim.steps.x_plus[0]), np.asarray(g.x_plus), atol=1e-9)
+    sw = _gait.sweep(vj.CompassGait(), np.radians([1.0, 2.0, 3.2, 4.0, 5.0]), "stable")
+    assert np.all(np.asarray(sw.ok))
+    assert sw.ends() == []
+    one = _gait.find_gait(vj.CompassGait(psi=math.radians(5.0)), "stable", guess=SEED)
+    np.testing.assert_allclose(np.asarray(sw.gaits.x_plus[-1]), np.asarray(one.x_plus), atol=1e-10)
+    # d z*/d psi from the sweep's tangent vs a central difference of two solves
+    dpsi = 1e-4
+    gp = _gait.find_gait(vj.CompassGait(psi=math.radians(4.0) + dpsi), "stable", guess=SEED)
+    gm = _gait.find_gait(vj.CompassGait(psi=math.radians(4.0) - dpsi), "stable", guess=SEED)
+    fd = (np.array([float(gp.a), float(gp.b)]) - np.array([float(gm.a), float(gm.b)])) / (2 * dpsi)
+    np.testing.assert_allclose(np.asarray(sw.tangent[3]), fd, rtol=1e-5)
