@@ -97,3 +97,14 @@ from ._transverse import (
     TransverseLinearization as TransverseLinearization,
     transverse_linearization as transverse_linearization,
 )
+
+# ---- gait search: VHC search (Problem 1), shooting (Problem 2), batches, sweeps (issue 3) ----
+from ._gait import (  # noqa: E402
+    Gait as Gait,
+    Sweep as Sweep,
+    find_gait as find_gait,
+    find_gaits as find_gaits,
+    shooting_search as shooting_search,
+    sweep as sweep,
+    vhc_search as vhc_search,
+)

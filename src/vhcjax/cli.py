@@ -15,6 +15,7 @@ import sys
 # Subcommand modules, in the order they appear in `vhcjax --help`.
 SUBCOMMANDS = [
     "_cli_simulate",
+    "_cli_gait",  # gait, sweep
     "_cli_bifurcation",  # bifurcation, multipliers
     "_cli_robustness",  # contraction, basin, slope-sensitivity, push
 ]
