@@ -16,8 +16,9 @@ def test_gait_json(capsys):
                "--guess", "0.2", "-1.0", "--json"])
     out = json.loads(capsys.readouterr().out)
     assert rc == 0
-    assert set(out) == {"result", "slope_deg", "family", "method", "x0", "params",
-                        "iterations", "residual"}
+    # the stability helper may add keys (multipliers); these must be there
+    assert {"result", "slope_deg", "family", "method", "x0", "params", "iterations",
+            "residual"} <= set(out)
     assert out["result"] == "successful" and out["family"] == "stable" and out["method"] == "vhc"
     assert set(out["params"]) == set("abcdefgh") | {"T", "E0"}
     g = _gait.find_gait(vj.CompassGait(), "stable", guess=(0.2, -1.0))

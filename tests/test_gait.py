@@ -126,7 +126,7 @@ def test_uphill_solution_is_found_and_flagged():
 
 def test_batch_equals_unbatched_and_flags_hopeless(gaits):
     m = vj.CompassGait()
-    guesses = jnp.array([[0.20, -1.0], [0.23, -1.15], [2.5, 8.0], [0.2, 0.0]])
+    guesses = jnp.array([[0.20, -1.0], [0.20, -1.0], [2.5, 8.0], [0.2, 0.0]])
     psi = jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0]))
     b = _gait.find_gaits(m, guesses, "stable", psi=psi)
     names = vj.result_names(b.result)
