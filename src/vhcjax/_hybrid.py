@@ -127,25 +127,66 @@ def _classify_solve(sol):
     return code
 
 
+def _latched(model, vector_field):
+    """Vector field and event for gated models, in ONE solve.
+
+    The state is augmented with a latch $w$, $\\dot w = 10^{-3}\\max(g,0)^2\\max(\\gamma,0)$
+    ($g$ = guard, $\\gamma$ = strike gate), so $w > 0$ exactly when the foot has been above
+    the slope with the swing leg ahead. The strike condition is the guard once $w > 0$ and
+    a positive constant before: it only switches between positive values, so its one
+    sign change is the true heel strike (a smooth root for the root finder). Mid-swing
+    scuffing, where the foot of equal legs dips through the slope, can never fire.
+    """
+    n = model.n_dof
+    vf = model.vector_field if vector_field is None else vector_field
+
+    def field(t, y, args):
+        x = y[:-1]
+        q = x[:n]
+        dw = 1e-3 * jnp.maximum(model.guard(q), 0.0) ** 2 * jnp.maximum(model.strike_gate(q), 0.0)
+        return jnp.concatenate([vf(t, x, args), dw[None]])
+
+    def strike(t, y, args, **kwargs):
+        g = model.guard(y[:n])
+        return jnp.where(y[-1] > 0, g, 1.0 + jnp.abs(g))
+
+    def fall(t, y, args, **kwargs):
+        return model.fallen(y[:n]) | ~jnp.all(jnp.isfinite(y))
+
+    event = diffrax.Event(
+        cond_fn=(strike, fall),
+        root_finder=optx.Newton(rtol=1e-13, atol=1e-13),
+        direction=(False, None),
+    )
+    return field, event
+
+
 def _swing(model, x0, t_max, alive, config, adjoint, vector_field):
-    """Swing phase to heel strike. Models with a `strike_gate` (e.g. the compass gait,
-    whose equal legs scuff through the slope mid-swing) are integrated in two stages:
-    first until the gate opens (swing leg ahead), then until the guard crosses zero
-    downward; a strike is only possible in the second stage."""
+    """Swing phase to heel strike: `(x_minus, period, code)`.
+
+    Models with a `strike_gate` (e.g. the compass gait) use the latched event of
+    `_latched`; others stop at the first downward crossing of `model.guard`.
+    """
     t1 = jnp.where(alive, t_max, 1e-9 * t_max)
-    kw = dict(adjoint=adjoint, vector_field=vector_field)
     if model.strike_gate(x0[: model.n_dof]) is None:
-        sol = flow(model, x0, t1, config, **kw)
+        sol = flow(model, x0, t1, config, adjoint=adjoint, vector_field=vector_field)
         return sol.ys[-1], sol.ts[-1], _classify_solve(sol)
-    sol1 = flow(model, x0, t1, config, gate=True, **kw)
-    code1 = _classify_solve(sol1)
-    opened = code1 == RESULTS.successful
-    t_gate = sol1.ts[-1]
-    t1b = jnp.where(opened, t1, t_gate + 1e-9 * t_max)
-    sol2 = flow(model, sol1.ys[-1], t1b, config, t0=t_gate, **kw)
-    code = RESULTS.where(opened, _classify_solve(sol2), code1)
-    x_minus = jnp.where(opened, sol2.ys[-1], sol1.ys[-1])
-    return x_minus, jnp.where(opened, sol2.ts[-1], t_gate), code
+    field, event = _latched(model, vector_field)
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(field),
+        _solver(config.solver),
+        t0=0.0,
+        t1=t1,
+        dt0=None,
+        y0=jnp.concatenate([x0, jnp.zeros((1,), x0.dtype)]),
+        stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
+        saveat=diffrax.SaveAt(t1=True),
+        event=event,
+        max_steps=config.max_steps,
+        adjoint=diffrax.ForwardMode() if adjoint is None else adjoint,
+        throw=False,
+    )
+    return sol.ys[-1][:-1], sol.ts[-1], _classify_solve(sol)
 
 
 def _step(model, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None, vector_field=None):
