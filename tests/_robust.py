@@ -9,18 +9,17 @@ import numpy as np
 
 import vhcjax as vj
 from vhcjax._hybrid import DEFAULT_CONFIG, simulate_jit
-from vhcjax._poincare import fixed_point
+from vhcjax import _poincare
 
 SEED = (0.2187, -1.092, -0.377)  # Newton seed (rounded) for the stable 3-degree gait
-fixed_point_jit = eqx.filter_jit(fixed_point)
-step_jit = eqx.filter_jit(vj.step)
+fixed_point_jit = _poincare.fixed_point_jit
+step_jit = vj.step  # jitted by the library
 
 
 @functools.lru_cache(maxsize=None)
 def stable_gait():
     """`(model, z_star, x_star, period)` of the stable 3-degree gait (Newton, 1e-12)."""
-    # Array leaves: every parameter value (e.g. a perturbed slope) reuses one compilation.
-    model = jax.tree_util.tree_map(lambda v: jnp.asarray(v, float), vj.CompassGait())
+    model = vj.CompassGait()
     fp = fixed_point_jit(model, jnp.asarray(SEED))
     assert vj.result_names(fp.result) == "successful"
     return model, fp.z, fp.x0, float(fp.periods[0])

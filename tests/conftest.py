@@ -11,3 +11,26 @@ def pytest_configure(config):
 @pytest.fixture(scope="session")
 def model():
     return vhcjax.CompassGait()
+
+
+def _memory_maps():
+    try:
+        with open("/proc/self/maps") as f:
+            return sum(1 for _ in f)
+    except OSError:  # not Linux
+        return 0
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_code():
+    """Drop compiled executables when the process holds too many memory maps.
+
+    XLA's CPU backend maps every compiled executable into memory sections of its own; a
+    long test session that compiles hundreds of programs can exhaust the kernel's
+    per-process map limit (vm.max_map_count, 65530 by default) and abort inside the
+    compiler. Past 30,000 maps, JAX's caches are cleared between test modules (below
+    that, modules share what earlier ones compiled).
+    """
+    yield
+    if _memory_maps() > 30_000:
+        jax.clear_caches()

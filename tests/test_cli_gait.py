@@ -58,8 +58,13 @@ def test_sweep_csv_png(tmp_path, capsys):
     assert rc == 0
     rows = list(csv.DictReader(open(csv_path)))
     assert len(rows) == 6
-    assert list(rows[0])[1:] == ["slope_deg", "result", "a", "b", "c", "d", "e", "f", "g", "h",
-                                 "T", "E0", "step_length", "speed"]
+    # the columns, in order, then the stability columns
+    assert list(rows[0])[1:15] == ["slope_deg", "result", "a", "b", "c", "d", "e", "f", "g", "h",
+                                   "T", "E0", "step_length", "speed"]
+    assert "mult1_re" in rows[0] and "stable" in rows[0]
+    # the stable family is stable at these slopes, the unstable one is not
+    assert all(r["stable"] in ("True", "true", "1") for r in rows if r["family"] == "stable")
+    assert all(r["stable"] in ("False", "false", "0") for r in rows if r["family"] == "unstable")
     assert all(r["result"] == "successful" for r in rows)
     r3 = [r for r in rows if r["family"] == "unstable" and float(r["slope_deg"]) == 3.0][0]
     np.testing.assert_allclose(float(r3["a"]), 0.204676, atol=6e-7)  # thesis (7.9)

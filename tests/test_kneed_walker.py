@@ -13,9 +13,9 @@ from vhcjax._kneed_walker import KneedWalker
 from vhcjax._multidomain import multidomain_trajectory
 from vhcjax._results import RESULTS
 
-fixed_point_jit = eqx.filter_jit(P.fixed_point)
-jacobian_jit = eqx.filter_jit(P.jacobian)
-simulate_jit = eqx.filter_jit(vhcjax.simulate)
+fixed_point_jit = P.fixed_point_jit
+jacobian_jit = P.jacobian_jit
+simulate_jit = vhcjax.simulate  # jitted by the library
 trajectory_jit = eqx.filter_jit(multidomain_trajectory)
 GUESS = jnp.array([0.19, -1.10, -0.04])  # near the Hsu Chen (2007) initial condition
 

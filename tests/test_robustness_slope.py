@@ -9,12 +9,12 @@ import pytest
 
 import vhcjax as vj
 from vhcjax._hybrid import DEFAULT_CONFIG
-from vhcjax._poincare import multipliers
+from vhcjax import _poincare
 from vhcjax._terrain import floor_step_model
 
 from _robust import fixed_point_jit, long_walk, returns_to, stable_gait, step_jit
 
-multipliers_jit = eqx.filter_jit(multipliers)
+multipliers_jit = _poincare.multipliers_jit
 
 
 @pytest.mark.slow

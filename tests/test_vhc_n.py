@@ -16,8 +16,8 @@ from vhcjax._results import RESULTS
 from vhcjax._transverse import transverse_linearization
 from vhcjax._vhc_search import vhc_gait_search, vhc_orbit
 
-fixed_point_jit = eqx.filter_jit(P.fixed_point)
-jacobian_jit = eqx.filter_jit(P.jacobian)
+fixed_point_jit = P.fixed_point_jit
+jacobian_jit = P.jacobian_jit
 vhc_orbit_jit = eqx.filter_jit(vhc_orbit)
 transverse_jit = eqx.filter_jit(transverse_linearization)
 

@@ -678,7 +678,8 @@ def _run_continuation(start, end, s_values, z0, sign, method):
     s_values = np.asarray(s_values, dtype=float)
     n = len(s_values)
     s_buf = np.concatenate([s_values, np.full(_pow2(n) - n, s_values[-1])])
-    gaits, tangents = _continue_jit(start, end, jnp.asarray(s_buf), n, z0, sign, method)
+    # `n` traced: every length up to the buffer size shares one compilation.
+    gaits, tangents = _continue_jit(start, end, jnp.asarray(s_buf), jnp.asarray(n), z0, sign, method)
     return jax.tree_util.tree_map(lambda x: x[:n], gaits), tangents[:n]
 
 

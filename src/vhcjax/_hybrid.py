@@ -325,4 +325,8 @@ def simulate(model, x0, num_steps, *, config=DEFAULT_CONFIG, dense_points=0, thr
     return sim
 
 
-simulate_jit = eqx.filter_jit(simulate)
+# The public entry points are jitted once here (models carry array leaves, so one
+# compilation serves every parameter value); every caller shares these caches.
+step = eqx.filter_jit(step)
+simulate = eqx.filter_jit(simulate)
+simulate_jit = simulate

@@ -1,11 +1,15 @@
 """The interface every walker model implements: energies, contact point, guard, relabelling.
 
-A model is an `eqx.Module` whose physical parameters are float leaves, so `jax.vmap` and
-`jax.grad` over masses, lengths, gravity and slope work out of the box. From the
+A model is an `eqx.Module` whose physical parameters are float64 array leaves (Python
+floats are converted on construction), so `jax.vmap` and `jax.grad` over masses, lengths,
+gravity and slope work out of the box, and a jitted function compiled for one model is
+reused for every other parameter value (a Python float would be a static, compile-time
+constant under `eqx.filter_jit`: one compilation per slope). From the
 energies, `vhcjax._mechanics` derives the equations of motion and the impact map.
 """
 
 import abc
+import dataclasses
 from typing import ClassVar
 
 import equinox as eqx
@@ -33,6 +37,12 @@ class WalkerModel(eqx.Module):
     """
 
     n_dof: ClassVar[int]
+
+    def __post_init__(self):
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name, None)
+            if isinstance(value, float) or (isinstance(value, int) and not isinstance(value, bool)):
+                object.__setattr__(self, field.name, jnp.asarray(value, dtype=float))
 
     @abc.abstractmethod
     def kinetic_energy(self, q, dq, base_velocity=None): ...

@@ -108,3 +108,10 @@ def fixed_point(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, config=
     return FixedPoint(
         z, model.section_to_state(z), final.periods, sol.stats["num_steps"], res, code
     )
+
+
+# Shared jitted entry points: one compile cache per function for the whole library.
+step_map_jit = eqx.filter_jit(step_map)
+jacobian_jit = eqx.filter_jit(jacobian)
+multipliers_jit = eqx.filter_jit(multipliers)
+fixed_point_jit = eqx.filter_jit(fixed_point)

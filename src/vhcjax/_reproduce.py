@@ -122,7 +122,7 @@ CHUNK = 8  # batch size of find_gaits / family_multipliers calls (one compile ea
 # ---------------------------------------------------------------------------------------
 # Shared compiled calls
 # ---------------------------------------------------------------------------------------
-_simulate_jit = eqx.filter_jit(simulate)
+_simulate_jit = simulate  # already jitted
 
 
 def _deg(x):

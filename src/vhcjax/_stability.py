@@ -26,6 +26,7 @@ import optimistix as optx
 
 from ._compass_gait import CompassGait
 from ._hybrid import DEFAULT_CONFIG, FAST_CONFIG, _solver, _step, simulate
+from . import _poincare
 from ._poincare import fixed_point, jacobian, step_map
 from ._results import RESULTS
 from ._transverse import TransverseLinearization, transverse_linearization
@@ -70,7 +71,7 @@ class GaitMultipliers(eqx.Module):
     linearization: TransverseLinearization
 
 
-def gait_multipliers(model, z, config=DEFAULT_CONFIG):
+def _gait_multipliers(model, z, config=DEFAULT_CONFIG):
     """Both multiplier computations at the period-1 gait with section coordinates `z`."""
     z = jnp.asarray(z, float)
     x0 = model.section_to_state(z)
@@ -82,17 +83,50 @@ def gait_multipliers(model, z, config=DEFAULT_CONFIG):
     return GaitMultipliers(tl.multipliers, pm, mx, mx < 1.0, sr.period, sr.x_minus, code, tl)
 
 
-gait_multipliers_jit = eqx.filter_jit(gait_multipliers)
-
-
 @eqx.filter_jit
+def _family_multipliers_padded(model, psis, zs, config):
+    return jax.vmap(lambda p, z: _gait_multipliers(with_slope(model, p), z, config))(psis, zs)
+
+
+def _bucket(n):
+    """Batch sizes that share a compilation: 8, 64, then multiples of 256."""
+    return 8 if n <= 8 else 64 if n <= 64 else 256 * -(-n // 256)
+
+
 def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG):
     """`gait_multipliers` for many slopes in one batched (`vmap`) call.
 
     `psis` (B,) in rad, `zs` (B, 2n-1) the gaits there. Returns a batched
-    `GaitMultipliers`.
+    `GaitMultipliers`. The batch is padded (copies of the first member) to 8, 64 or a
+    multiple of 256, so that every batch size up to the bucket shares one compilation:
+    tracing the transverse linearization through diffrax costs far more than running it.
     """
-    return jax.vmap(lambda p, z: gait_multipliers(with_slope(model, p), z, config))(psis, zs)
+    psis = jnp.atleast_1d(jnp.asarray(psis, float))
+    zs = jnp.asarray(zs, float).reshape(psis.shape[0], -1)
+    n = psis.shape[0]
+    pad = _bucket(n) - n
+    psis = jnp.concatenate([psis, jnp.broadcast_to(psis[:1], (pad,))])
+    zs = jnp.concatenate([zs, jnp.broadcast_to(zs[:1], (pad, zs.shape[1]))])
+    out = _family_multipliers_padded(model, psis, zs, config)
+    return jax.tree_util.tree_map(lambda x: x[:n], out)
+
+
+def gait_multipliers(model, z, config=DEFAULT_CONFIG):
+    """Both multiplier computations at the period-1 gait with section coordinates `z`:
+    `transverse` (eigenvalues of Xi, thesis 6.42) and `poincare` (eigenvalues of the
+    autodiff Jacobian of the step map), sorted by modulus.
+
+    Runs as a batch of one of `family_multipliers` (same compiled program) when the
+    model has a slope `psi`; otherwise compiles on its own.
+    """
+    if not hasattr(model, "psi"):
+        return _gait_multipliers_jit(model, z, config)
+    out = family_multipliers(model, jnp.asarray(model.psi)[None], jnp.asarray(z, float)[None], config)
+    return jax.tree_util.tree_map(lambda x: x[0], out)
+
+
+_gait_multipliers_jit = eqx.filter_jit(_gait_multipliers)
+gait_multipliers_jit = gait_multipliers
 
 
 def finite_difference_jacobian(model, z, k=1, h=1e-6, config=DEFAULT_CONFIG):
@@ -173,7 +207,7 @@ def midswing_multipliers(model, z, config=DEFAULT_CONFIG):
 
 
 # ---- the period-1 family over slopes ----------------------------------------------------
-_fixed_point_jit = eqx.filter_jit(fixed_point)
+_fixed_point_jit = _poincare.fixed_point_jit
 
 
 @eqx.filter_jit
@@ -235,7 +269,7 @@ def _flip_function(model, psi, z0, config, k=1):
     return float(jnp.linalg.det(jnp.eye(J.shape[0]) + J)), np.asarray(fp.z), fp.result
 
 
-_jacobian_jit = eqx.filter_jit(jacobian)
+_jacobian_jit = _poincare.jacobian_jit
 
 
 class PeriodDoubling(eqx.Module):
@@ -319,7 +353,7 @@ def settle(model, z0, num_steps=400, config=FAST_CONFIG):
     return np.asarray(model.state_to_section(sim.steps.x_plus[-1]))
 
 
-_simulate_jit = eqx.filter_jit(simulate)
+_simulate_jit = simulate  # already jitted
 
 
 def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG):
@@ -345,7 +379,7 @@ def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG):
                         minimal)
 
 
-_step_map_jit = eqx.filter_jit(step_map)
+_step_map_jit = _poincare.step_map_jit
 
 
 # ---- bifurcation diagram ---------------------------------------------------------------
