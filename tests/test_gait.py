@@ -3,6 +3,7 @@
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -146,24 +147,30 @@ def test_batch_over_model_parameters():
     np.testing.assert_allclose(np.asarray(b.x_plus[1]), np.asarray(one.x_plus), atol=1e-10)
 
 
+# One compilation each for both families (the family sign and the model are traced).
+_vhc_r = eqx.filter_jit(_gait.vhc_residual)
+_vhc_J = eqx.filter_jit(jax.jacfwd(_gait.vhc_residual, argnums=1))
+_shoot_r = eqx.filter_jit(lambda m, x: _gait._shoot_eval(m, x)[0])
+_shoot_J = eqx.filter_jit(jax.jacfwd(lambda m, x: _gait._shoot_eval(m, x)[0], argnums=1))
+
+
+def _central(r, x, h):
+    return np.stack([(np.asarray(r(x + h * e)) - np.asarray(r(x - h * e))) / (2 * h)
+                     for e in np.eye(x.shape[0])], axis=1)
+
+
 @pytest.mark.parametrize("fam", ["stable", "unstable"])
 def test_newton_jacobians_match_finite_differences(gaits, fam):
     m = vj.CompassGait()
     g = gaits[3.0, fam, "vhc"]
     sign = _gait.family_sign(fam)
     for ab in (jnp.stack([g.a, g.b]), jnp.stack([g.a, g.b]) + jnp.array([0.004, -0.01])):
-        r = jax.jit(lambda x: _gait.vhc_residual(m, x, sign))
-        J = np.asarray(jax.jit(jax.jacfwd(lambda x: _gait.vhc_residual(m, x, sign)))(ab))
-        h = 1e-6
-        fd = np.stack([(np.asarray(r(ab + h * e)) - np.asarray(r(ab - h * e))) / (2 * h)
-                       for e in np.eye(2)], axis=1)
+        J = np.asarray(_vhc_J(m, ab, sign))
+        fd = _central(lambda x: _vhc_r(m, x, sign), ab, 1e-6)
         np.testing.assert_allclose(J, fd, rtol=1e-5, atol=1e-6)
     z = g.z
-    r = jax.jit(lambda x: _gait._shoot_eval(m, x)[0])
-    J = np.asarray(jax.jit(jax.jacfwd(lambda x: _gait._shoot_eval(m, x)[0]))(z))
-    h = 1e-5
-    fd = np.stack([(np.asarray(r(z + h * e)) - np.asarray(r(z - h * e))) / (2 * h)
-                   for e in np.eye(3)], axis=1)
+    J = np.asarray(_shoot_J(m, z))
+    fd = _central(lambda x: _shoot_r(m, x), z, 1e-5)
     np.testing.assert_allclose(J, fd, rtol=1e-4, atol=1e-5)
 
 

@@ -20,6 +20,7 @@ import numpy as np
 from ._bisection import bisect_threshold
 from ._hybrid import FAST_CONFIG
 from ._recovery import CONVERGED, recover
+from ._sharding import device_multiple, shard_batch
 
 SECTION_NAMES = ("q1", "dq1", "dq2")
 BASIN_CONFIG = FAST_CONFIG
@@ -33,14 +34,21 @@ def _recover_chunk(model, z, z_star, num_steps, tol, config):
 
 
 def classify_section_points(model, z_star, z, *, num_steps=50, tol=1e-4, chunk=1024,
-                            config=BASIN_CONFIG, progress=None):
+                            config=BASIN_CONFIG, progress=None, mesh=None):
     """Classify section points `z` (shape `(N, 2n-1)`) by their fate (host loop over chunks).
+
+    Each chunk is split over the devices of `mesh` (default: all local devices; see
+    `vhcjax._sharding`), so the same call uses every GPU of a machine (or of several hosts
+    after `jax.distributed.initialize()`); `chunk` is rounded up to a multiple of the
+    device count.
 
     **Returns:** dict of numpy arrays: `label`, `steps`, `period`, `result` (integer
     `RESULTS` codes), `z_final`.
     """
     z = np.asarray(z, dtype=float)
     n = z.shape[0]
+    n_dev = device_multiple(mesh)
+    chunk = -(-chunk // n_dev) * n_dev
     out = {k: [] for k in ("label", "steps", "period", "result", "z_final")}
     starts = range(0, n, chunk)
     for s in progress(starts) if progress is not None else starts:
@@ -48,8 +56,8 @@ def classify_section_points(model, z_star, z, *, num_steps=50, tol=1e-4, chunk=1
         pad = chunk - part.shape[0]
         if pad:
             part = np.concatenate([part, np.repeat(np.asarray(z_star)[None], pad, 0)])
-        rec = _recover_chunk(model, jnp.asarray(part), jnp.asarray(z_star), num_steps, tol,
-                             config)
+        rec = _recover_chunk(model, shard_batch(jnp.asarray(part), mesh), jnp.asarray(z_star),
+                             num_steps, tol, config)
         keep = chunk - pad
         out["label"].append(np.asarray(rec.label)[:keep])
         out["steps"].append(np.asarray(rec.steps)[:keep])
@@ -103,7 +111,8 @@ def _reach(ok_line, offsets, sign):
 
 
 def basin_slice(model, z_star, *, axes=(0, 1), half_widths=(0.1, 0.4), shape=(200, 200),
-                num_steps=50, tol=1e-4, chunk=1024, config=BASIN_CONFIG, progress=None):
+                num_steps=50, tol=1e-4, chunk=1024, config=BASIN_CONFIG, progress=None,
+                mesh=None):
     """Classify a `shape = (nx, ny)` grid of perturbations of `z_star` along two section
     coordinates (`axes`), the others nominal.
 
@@ -132,7 +141,7 @@ def basin_slice(model, z_star, *, axes=(0, 1), half_widths=(0.1, 0.4), shape=(20
     z[:, axes[0]] += gx.ravel()
     z[:, axes[1]] += gy.ravel()
     out = classify_section_points(model, z_star, z, num_steps=num_steps, tol=tol,
-                                  chunk=chunk, config=config, progress=progress)
+                                  chunk=chunk, config=config, progress=progress, mesh=mesh)
     label = out["label"].reshape(ny, nx)
     conv = label == CONVERGED
     cell = (ox[1] - ox[0]) * (oy[1] - oy[0]) if nx > 1 and ny > 1 else 0.0
@@ -214,7 +223,8 @@ class BasinVolume(eqx.Module):
 
 
 def basin_volume(model, z_star, half_widths, *, num_samples=4096, key=None, num_steps=50,
-                 tol=1e-4, chunk=1024, config=BASIN_CONFIG, confidence=0.95, progress=None):
+                 tol=1e-4, chunk=1024, config=BASIN_CONFIG, confidence=0.95, progress=None,
+                 mesh=None):
     """Monte-Carlo estimate (uniform samples) of the fraction of the box
     `z_star +- half_widths` in the full section that converges to the gait, with a Wilson
     confidence interval.
@@ -229,7 +239,7 @@ def basin_volume(model, z_star, half_widths, *, num_samples=4096, key=None, num_
     u = np.asarray(jax.random.uniform(key, (num_samples, z_star.shape[0]), minval=-1, maxval=1))
     z = z_star[None] + u * hw[None]
     out = classify_section_points(model, z_star, z, num_steps=num_steps, tol=tol, chunk=chunk,
-                                  config=config, progress=progress)
+                                  config=config, progress=progress, mesh=mesh)
     k = int(np.sum(out["label"] == CONVERGED))
     lo, hi = wilson_interval(k, num_samples, confidence)
     box = float(np.prod(2 * hw))

@@ -67,3 +67,25 @@ def _vmapped(fn):
     if fn not in _cache:
         _cache[fn] = eqx.filter_jit(jax.vmap(fn))
     return _cache[fn]
+
+
+def shard_batch(tree, mesh=None):
+    """Place the leaves of `tree` (common leading batch axis) split over the `"batch"` axis
+    of `mesh` (default: all local devices), so that a jitted, vmapped computation on them
+    runs partitioned across the devices (XLA SPMD), replicated inputs staying whole.
+
+    A no-op with one device. The batch size must be a multiple of the number of devices
+    (callers pad their chunks); otherwise the leaves are left where they are.
+    """
+    mesh = default_mesh() if mesh is None else mesh
+    n_dev = mesh.devices.size
+    leaves = jax.tree_util.tree_leaves(tree)
+    if n_dev == 1 or not leaves or leaves[0].shape[0] % n_dev:
+        return tree
+    sharding = NamedSharding(mesh, PartitionSpec("batch"))
+    return jax.tree_util.tree_map(lambda x: jax.device_put(jnp.asarray(x), sharding), tree)
+
+
+def device_multiple(mesh=None):
+    """Number of devices a batch should be a multiple of (1 on a single device)."""
+    return (default_mesh() if mesh is None else mesh).devices.size

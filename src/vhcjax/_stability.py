@@ -29,6 +29,7 @@ from ._hybrid import DEFAULT_CONFIG, FAST_CONFIG, _solver, _step, simulate
 from . import _poincare
 from ._poincare import fixed_point, jacobian, step_map
 from ._results import RESULTS
+from ._sharding import device_multiple, shard_batch
 from ._transverse import TransverseLinearization, transverse_linearization
 
 #: Stable and unstable period-1 gaits of the default compass gait at 3 degrees
@@ -418,14 +419,16 @@ def count_distinct(periods, tol=1e-6):
 
 
 def bifurcation_diagram(psis, zs, *, model=None, num_transient=300, num_record=64,
-                        perturbation=1e-4, config=FAST_CONFIG, chunk=None):
+                        perturbation=1e-4, config=FAST_CONFIG, chunk=None, mesh=None):
     """Simulate from the period-1 gaits `zs` at slopes `psis` (rad) for
     `num_transient + num_record` steps (batched with `vmap`) and keep the step periods
     of the last `num_record`.
 
     The start is the gait plus `perturbation` on $\\dot q_2$, so that unstable period-1
     gaits (past the flip) leave towards the attractor. Default tolerance: `FAST_CONFIG`
-    (rtol = atol = 1e-8). `chunk`: optional batch size (memory).
+    (rtol = atol = 1e-8). `chunk`: optional batch size (memory). Each chunk is padded to
+    a multiple of the device count and split over the devices of `mesh` (default: all
+    local devices; `vhcjax._sharding`).
     """
     model = CompassGait() if model is None else model
     psis = np.asarray(psis, float)
@@ -438,10 +441,15 @@ def bifurcation_diagram(psis, zs, *, model=None, num_transient=300, num_record=6
     P, R = [], []
     for i in range(0, n, chunk):
         sl = slice(i, min(i + chunk, n))
-        p, r = _long_runs(model, jnp.asarray(psis[sl]), jnp.asarray(x0s[sl]),
+        ps, xs = psis[sl], x0s[sl]
+        k = len(ps)
+        pad = -(-k // device_multiple(mesh)) * device_multiple(mesh) - k
+        ps = np.concatenate([ps, np.repeat(ps[-1:], pad)])
+        xs = np.concatenate([xs, np.repeat(xs[-1:], pad, axis=0)])
+        p, r = _long_runs(model, *shard_batch((jnp.asarray(ps), jnp.asarray(xs)), mesh),
                           num_transient + num_record, num_record, config)
-        P.append(np.asarray(p))
-        R.append(np.asarray(r._value))
+        P.append(np.asarray(p)[:k])
+        R.append(np.asarray(r._value)[:k])
     periods = np.concatenate(P)
     codes = np.concatenate(R)
     fell = codes != int(RESULTS.successful._value)
