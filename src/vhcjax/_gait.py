@@ -740,7 +740,8 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
 # ---------------------------------------------------------------------------------------
 # Batches
 # ---------------------------------------------------------------------------------------
-_BUCKETS = (1, 8, 64, 256, 1024)
+_BUCKETS = (1, 8, 64, 256)
+_MAX_CHUNK = 256
 
 
 def _bucket(n):
@@ -785,8 +786,8 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     - `family`, `method`, `solver`: as in `find_gait`.
     - `psi`: optional `(B,)` slopes (rad), replacing `model.psi`.
 
-    Batches are padded to a few bucket sizes (1, 8, 64, 256, 1024, multiples of 1024)
-    with copies of the first member, so that new sizes rarely recompile.
+    Batches are padded to a few bucket sizes (1, 8, 64, 256) with copies of the first
+    member, so that new sizes rarely recompile; larger batches run in chunks of 256.
 
     **Returns:** a `Gait` with a leading batch axis; check `result` per member.
     """
@@ -800,6 +801,23 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     if not sizes:
         raise ValueError("find_gaits needs a batch: guesses, psi or batched model parameters")
     B = max(sizes)
+    if B > _MAX_CHUNK:
+        # Host loop over chunks of _MAX_CHUNK: a single vmapped Newton batch of 1,024 hung
+        # inside the XLA CPU runtime (all threads idle); 256 runs reliably.
+        def part(x, i):
+            if eqx.is_array(x) and jnp.ndim(x) > 0:
+                return jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])[i : i + _MAX_CHUNK]
+            return x
+
+        chunks = [
+            find_gaits(
+                jax.tree_util.tree_map(lambda x: part(x, i), model),
+                None if guesses is None else part(guesses, i),
+                family, method, solver=solver,
+            )
+            for i in range(0, B, _MAX_CHUNK)
+        ]
+        return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *chunks)
     P = _bucket(B)
 
     def pad(x):
