@@ -16,7 +16,7 @@ def test_gait_json(capsys):
                "--guess", "0.2", "-1.0", "--json"])
     out = json.loads(capsys.readouterr().out)
     assert rc == 0
-    # the stability helper may add keys (multipliers); these must be there
+    # issue 4 adds keys (multipliers); these must be there
     assert {"result", "slope_deg", "family", "method", "x0", "params", "iterations",
             "residual"} <= set(out)
     assert out["result"] == "successful" and out["family"] == "stable" and out["method"] == "vhc"
