@@ -18,6 +18,7 @@ from ._hybrid import (
     SolverConfig as SolverConfig,
     StepResult as StepResult,
     simulate as simulate,
+    simulate_batch as simulate_batch,
     step as step,
 )
 from ._mechanics import (
@@ -28,6 +29,7 @@ from ._mechanics import (
     mass_matrix as mass_matrix,
 )
 from ._model import WalkerModel as WalkerModel
+from . import trig as trig  # vectorizable sin/cos for model kinematics
 from ._results import RESULTS as RESULTS, result_codes as result_codes, result_names as result_names
 
 try:

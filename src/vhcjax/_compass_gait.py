@@ -7,6 +7,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from . import trig
 from ._model import WalkerModel
 
 
@@ -81,11 +82,11 @@ class CompassGait(WalkerModel):
         """Positions (world frame, stance foot at the origin) of the stance-leg mass, hip,
         swing-leg mass and swing foot: a dict of 2-vectors (thesis 3.3, appendix C.2)."""
         q1, q2 = q[0], q[1]
-        hip = self.l * jnp.stack([-jnp.sin(q1), jnp.cos(q1)])
-        down2 = jnp.stack([jnp.sin(q2), -jnp.cos(q2)])
+        hip = self.l * jnp.stack([-trig.sin(q1), trig.cos(q1)])
+        down2 = jnp.stack([trig.sin(q2), -trig.cos(q2)])
         return {
             "stance_foot": jnp.zeros(2, hip.dtype),
-            "stance_mass": self.b * jnp.stack([-jnp.sin(q1), jnp.cos(q1)]),
+            "stance_mass": self.b * jnp.stack([-trig.sin(q1), trig.cos(q1)]),
             "hip": hip,
             "swing_mass": hip + self.a * down2,
             "swing_foot": hip + self.l * down2,
@@ -119,7 +120,7 @@ class CompassGait(WalkerModel):
     # ---- hybrid structure -----------------------------------------------------------------
     def switching_surface(self, q):
         """$H(q) = \\cos(q_1 + \\psi) - \\cos(q_2 + \\psi)$ (thesis 3.31)."""
-        return jnp.cos(q[0] + self.psi) - jnp.cos(q[1] + self.psi)
+        return trig.cos(q[0] + self.psi) - trig.cos(q[1] + self.psi)
 
     def swing_foot_height(self, q):
         """Height of the swing foot above the slope (m), $l H(q)/\\cos\\psi$."""
@@ -127,7 +128,7 @@ class CompassGait(WalkerModel):
 
     def hip_height(self, q):
         """Height of the hip above the slope, measured along the normal (m)."""
-        return self.l * jnp.cos(q[0] + self.psi)
+        return self.l * trig.cos(q[0] + self.psi)
 
     def strike_gate(self, q):
         """$q_2 - q_1 - \\delta$: the swing leg is ahead of the stance leg by $\\delta$ =
@@ -163,7 +164,7 @@ class CompassGait(WalkerModel):
 
     def fallen(self, q):
         """Hip on the ground, or legs folded past each other by more than half a turn."""
-        return (jnp.cos(q[0] + self.psi) <= 0.0) | (jnp.abs(q[1] - q[0]) >= jnp.pi)
+        return (trig.cos(q[0] + self.psi) <= 0.0) | (jnp.abs(q[1] - q[0]) >= jnp.pi)
 
     # ---- thesis closed forms (reference implementations, used by tests) -----------------
     def impact_momentum(self, x_minus):

@@ -31,6 +31,7 @@ import optimistix as optx
 from . import _poincare
 from ._hybrid import DEFAULT_CONFIG, SolverConfig, _step
 from ._results import RESULTS
+from ._sharding import device_multiple, shard_batch
 from ._vhc import phi_second_derivative
 
 FAMILIES = ("stable", "unstable")
@@ -775,7 +776,8 @@ def _from_reference_batch(model, sign, method, num, axes):
     return eqx.filter_vmap(lambda m: _from_reference(m, sign, method, num), in_axes=(axes,))(model)
 
 
-def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, solver="newton"):
+def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, solver="newton",
+               mesh=None):
     """Batched `find_gait`: `vmap` over guesses, slopes and model parameters, never raises.
 
     **Arguments:**
@@ -785,9 +787,13 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
       from the reference gait (per member).
     - `family`, `method`, `solver`: as in `find_gait`.
     - `psi`: optional `(B,)` slopes (rad), replacing `model.psi`.
+    - `mesh`: a `jax.sharding.Mesh` with a `"batch"` axis; default: all local devices.
 
     Batches are padded to a few bucket sizes (1, 8, 64, 256) with copies of the first
     member, so that new sizes rarely recompile; larger batches run in chunks of 256.
+    Each padded batch is split over the devices of `mesh` (several GPUs, or CPU devices
+    with `XLA_FLAGS=--xla_force_host_platform_device_count=N`); results are identical to
+    a single-device run.
 
     **Returns:** a `Gait` with a leading batch axis; check `result` per member.
     """
@@ -813,16 +819,18 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
             find_gaits(
                 jax.tree_util.tree_map(lambda x: part(x, i), model),
                 None if guesses is None else part(guesses, i),
-                family, method, solver=solver,
+                family, method, solver=solver, mesh=mesh,
             )
             for i in range(0, B, _MAX_CHUNK)
         ]
         return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *chunks)
-    P = _bucket(B)
+    n_dev = device_multiple(mesh)
+    P = _bucket(B) if B == 1 else -(-_bucket(B) // n_dev) * n_dev
 
     def pad(x):
         x = jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])
-        return jnp.concatenate([x, jnp.broadcast_to(x[:1], (P - B,) + x.shape[1:])])
+        x = jnp.concatenate([x, jnp.broadcast_to(x[:1], (P - B,) + x.shape[1:])])
+        return shard_batch(x, mesh)
 
     model = jax.tree_util.tree_map(
         lambda x: pad(x) if (eqx.is_array(x) and jnp.ndim(x) > 0) else x, model

@@ -16,7 +16,9 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from . import trig
 from ._results import RESULTS
+from ._sharding import device_multiple, shard_batch
 
 
 class SolverConfig(NamedTuple):
@@ -294,7 +296,8 @@ def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
         return (x_next, ok, new_fail), (out, dense)
 
     init = (x0, jnp.asarray(True), RESULTS.successful)
-    (_, _, first_fail), (steps, dense) = jax.lax.scan(body, init, None, length=num_steps)
+    with trig.polynomial():  # many walkers x many steps: vectorizable sin/cos (see `trig`)
+        (_, _, first_fail), (steps, dense) = jax.lax.scan(body, init, None, length=num_steps)
     num_ok = jnp.sum(steps.result._value == RESULTS.successful._value)
     dense_t, dense_x = (None, None) if dense is None else dense
     return Simulation(steps, first_fail, num_ok, x0, dense_t, dense_x)
@@ -330,3 +333,40 @@ def simulate(model, x0, num_steps, *, config=DEFAULT_CONFIG, dense_points=0, thr
 step = eqx.filter_jit(step)
 simulate = eqx.filter_jit(simulate)
 simulate_jit = simulate
+
+
+@eqx.filter_jit
+def _simulate_many(model, x0, num_steps, config):
+    return jax.vmap(lambda x: _simulate(model, x, num_steps, config))(x0)
+
+
+def simulate_batch(model, x0, num_steps, *, config=DEFAULT_CONFIG, mesh=None):
+    """Simulate a batch of walkers of one model, spread over all devices.
+
+    The batch is padded to a multiple of the device count and split over the `"batch"`
+    axis of `mesh` (default: all local devices, e.g. several GPUs, or several CPU devices
+    with `XLA_FLAGS=--xla_force_host_platform_device_count=N`); with one device this is
+    `jit(vmap(simulate))`. Results agree with unbatched `simulate` calls to rounding.
+
+    **Arguments:**
+
+    - `model`: a `WalkerModel`.
+    - `x0`: initial states, shape `(batch, 2 n_dof)`.
+    - `num_steps`: number of steps (static).
+    - `config`: a `SolverConfig`.
+    - `mesh`: a `jax.sharding.Mesh` with a `"batch"` axis, or None.
+
+    **Returns:** a `Simulation` whose arrays carry a leading batch axis.
+    """
+    x0 = jnp.asarray(x0, dtype=float)
+    if x0.ndim != 2 or x0.shape[1] != 2 * model.n_dof or x0.shape[0] == 0:
+        raise ValueError(
+            f"x0 must have shape (batch, {2 * model.n_dof}) with batch >= 1, got {x0.shape}"
+        )
+    n = x0.shape[0]
+    multiple = device_multiple(mesh)
+    pad = -(-n // multiple) * multiple - n
+    if pad:
+        x0 = jnp.concatenate([x0, jnp.repeat(x0[-1:], pad, axis=0)])
+    sim = _simulate_many(model, shard_batch(x0, mesh), num_steps, config)
+    return jax.tree_util.tree_map(lambda a: a[:n], sim)

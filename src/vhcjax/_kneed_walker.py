@@ -18,6 +18,7 @@ from typing import ClassVar
 import jax
 import jax.numpy as jnp
 
+from . import trig
 from ._multidomain import (
     MultiDomainModel,
     augmented_impact_locked,
@@ -83,9 +84,9 @@ class KneedWalker(MultiDomainModel):
     def points(self, q):
         """World positions (stance foot at the origin) of the masses, hip, knee and feet."""
         q1, q2, q3 = q[0], q[1], q[2]
-        up1 = jnp.stack([-jnp.sin(q1), jnp.cos(q1)])
-        d2 = jnp.stack([jnp.sin(q2), -jnp.cos(q2)])
-        d3 = jnp.stack([jnp.sin(q3), -jnp.cos(q3)])
+        up1 = jnp.stack([-trig.sin(q1), trig.cos(q1)])
+        d2 = jnp.stack([trig.sin(q2), -trig.cos(q2)])
+        d3 = jnp.stack([trig.sin(q3), -trig.cos(q3)])
         hip = self.L * up1
         knee = hip + self.lt * d2
         return {
@@ -197,7 +198,7 @@ class KneedWalker(MultiDomainModel):
         """Hip on the ground, legs folded past each other, or the knee bent or
         hyperextended by more than 90 degrees."""
         return (
-            (jnp.cos(q[0] + self.psi) <= 0.0)
+            (trig.cos(q[0] + self.psi) <= 0.0)
             | (jnp.abs(q[1] - q[0]) >= jnp.pi)
             | (jnp.abs(q[1] - q[2]) >= 0.5 * jnp.pi)
         )

@@ -12,6 +12,7 @@ from typing import ClassVar
 import jax
 import jax.numpy as jnp
 
+from . import trig
 from ._compass_gait import CompassGait
 
 
@@ -36,7 +37,7 @@ class PendulumWalker(CompassGait):
 
     def points(self, q):
         pts = super().points(q)
-        pts["pendulum"] = pts["hip"] + self.lp * jnp.stack([jnp.sin(q[2]), -jnp.cos(q[2])])
+        pts["pendulum"] = pts["hip"] + self.lp * jnp.stack([trig.sin(q[2]), -trig.cos(q[2])])
         return pts
 
     def kinetic_energy(self, q, dq, base_velocity=None):

@@ -13,6 +13,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from . import trig
 from ._hybrid import FAST_CONFIG, _step
 from ._results import RESULTS
 
@@ -68,6 +69,13 @@ def recover(model, x0, x_star, num_steps=50, *, tol=1e-4, cycle_tol=1e-5, max_pe
 
     **Returns:** a `Recovery`.
     """
+    with trig.polynomial():  # many walkers x many steps: vectorizable sin/cos (see `trig`)
+        return _recover(model, x0, x_star, num_steps, tol, cycle_tol, max_period, config,
+                        first_step, stop_when_converged)
+
+
+def _recover(model, x0, x_star, num_steps, tol, cycle_tol, max_period, config, first_step,
+             stop_when_converged):
     x0 = jnp.asarray(x0, dtype=float)
     x_star = jnp.asarray(x_star, dtype=float)
     B = x0.shape[0]

@@ -94,20 +94,24 @@ def _bucket(n):
     return 8 if n <= 8 else 64 if n <= 64 else 256 * -(-n // 256)
 
 
-def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG):
+def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, mesh=None):
     """`gait_multipliers` for many slopes in one batched (`vmap`) call.
 
     `psis` (B,) in rad, `zs` (B, 2n-1) the gaits there. Returns a batched
     `GaitMultipliers`. The batch is padded (copies of the first member) to 8, 64 or a
     multiple of 256, so that every batch size up to the bucket shares one compilation:
     tracing the transverse linearization through diffrax costs far more than running it.
+    Batches above one member are split over the devices of `mesh` (default: all local
+    devices).
     """
     psis = jnp.atleast_1d(jnp.asarray(psis, float))
     zs = jnp.asarray(zs, float).reshape(psis.shape[0], -1)
     n = psis.shape[0]
-    pad = _bucket(n) - n
+    n_dev = device_multiple(mesh)
+    pad = (_bucket(n) if n == 1 else -(-_bucket(n) // n_dev) * n_dev) - n
     psis = jnp.concatenate([psis, jnp.broadcast_to(psis[:1], (pad,))])
     zs = jnp.concatenate([zs, jnp.broadcast_to(zs[:1], (pad, zs.shape[1]))])
+    psis, zs = shard_batch((psis, zs), mesh)
     out = _family_multipliers_padded(model, psis, zs, config)
     return jax.tree_util.tree_map(lambda x: x[:n], out)
 
