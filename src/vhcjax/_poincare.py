@@ -28,14 +28,19 @@ class MapResult(eqx.Module):
 def step_map(model, z, k=1, config=DEFAULT_CONFIG):
     """$P^k(z)$: `k` steps of the hybrid simulation from section coordinates `z`."""
     x = model.section_to_state(z)
-    periods = []
-    result = RESULTS.successful
-    for _ in range(k):  # k is static and small (1, 2, 4, ...)
+    if k == 1:
+        sr = _step(model, x, config)
+        return MapResult(model.state_to_section(sr.x_plus), sr.period[None], sr.result)
+
+    # k > 1: a scan traces the step once (an unrolled loop compiled k copies of it)
+    def body(carry, _):
+        x, result = carry
         sr = _step(model, x, config)
         result = RESULTS.where(result == RESULTS.successful, sr.result, result)
-        x = sr.x_plus
-        periods.append(sr.period)
-    return MapResult(model.state_to_section(x), jnp.stack(periods), result)
+        return (sr.x_plus, result), sr.period
+
+    (x, result), periods = jax.lax.scan(body, (x, RESULTS.successful), None, length=k)
+    return MapResult(model.state_to_section(x), periods, result)
 
 
 def jacobian(model, z, k=1, config=DEFAULT_CONFIG):
