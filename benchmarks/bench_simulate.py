@@ -1,13 +1,15 @@
 """Batched compass-gait simulation (vmap + jit) against a scipy `solve_ivp` loop.
 
 N walkers x K steps from random starts around the stable 3-degree gait. vhcjax runs them
-as one jitted, vmapped `simulate`; the baseline (`scipy_reference.py`: thesis closed-form
-equations, `solve_ivp` with terminal events, numpy impact map) loops over walkers and
+with `simulate_batch` (one jitted, vmapped program; with `--cpu-devices N` the batch is
+split over N CPU devices, one per core, by `jax.sharding`); the baseline
+(`scipy_reference.py`: thesis closed-form equations, `solve_ivp` with terminal events,
+numpy impact map) loops over walkers and
 steps in Python, at the same rtol/atol, on a subset of the walkers (its cost is linear in
 the number of walker-steps). Compile time is reported separately from run time (best of
 `--repeats`). Both must agree on the step periods.
 
-    python benchmarks/bench_simulate.py [--quick] [--json OUT]
+    python benchmarks/bench_simulate.py [--solver dopri8] [--cpu-devices 2] [--quick] [--json OUT]
 """
 
 import argparse
@@ -35,12 +37,17 @@ def main(argv=None):
     ap.add_argument("--scipy-walkers", type=int, default=30, help="walkers run by scipy (30)")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--spread", type=float, default=0.02, help="random start spread (0.02)")
+    ap.add_argument("--cpu-devices", type=int, default=1,
+                    help="split the batch over this many CPU devices (XLA host devices)")
     ap.add_argument("--quick", action="store_true", help="small sizes (N=64, K=3)")
     ap.add_argument("--json", metavar="OUT", help="write the results as JSON")
     args = ap.parse_args(argv)
     if args.quick:
         args.walkers, args.steps, args.scipy_walkers, args.repeats = 64, 3, 5, 1
 
+    if args.cpu_devices > 1:  # must be set before JAX starts its CPU backend
+        os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") +
+                                   f" --xla_force_host_platform_device_count={args.cpu_devices}")
     import jax
     import jax.numpy as jnp
 
@@ -55,17 +62,15 @@ def main(argv=None):
     model = vj.CompassGait(psi=psi)
     config = vj.SolverConfig(rtol=args.rtol, atol=args.rtol, max_steps=args.max_steps,
                              solver=args.solver)
-    run = jax.jit(jax.vmap(lambda x: vj.simulate(model, x, args.steps, config=config)))
     X = jnp.asarray(x0)
 
     t = time.perf_counter()
-    sim = jax.block_until_ready(run.lower(X).compile()(X))
+    sim = jax.block_until_ready(vj.simulate_batch(model, X, args.steps, config=config))
     compile_s = time.perf_counter() - t  # compile + first run
-    compiled = run.lower(X).compile()
     times = []
     for _ in range(args.repeats):
         t = time.perf_counter()
-        sim = jax.block_until_ready(compiled(X))
+        sim = jax.block_until_ready(vj.simulate_batch(model, X, args.steps, config=config))
         times.append(time.perf_counter() - t)
     run_s = min(times)
     compile_s -= run_s
@@ -90,6 +95,7 @@ def main(argv=None):
 
     res = {
         "device": str(jax.devices()[0].device_kind),
+        "num_devices": len(jax.devices()),
         "platform": platform.processor() or platform.machine(),
         "cpu_count": os.cpu_count(),
         "walkers": args.walkers, "steps": args.steps, "rtol": args.rtol,
@@ -102,7 +108,8 @@ def main(argv=None):
         "speedup": jax_rate / sc_rate,
         "max_period_difference_s": max_dT,
     }
-    print(f"vhcjax  {args.walkers} walkers x {args.steps} steps ({args.solver}, rtol=atol="
+    print(f"vhcjax  {args.walkers} walkers x {args.steps} steps on {len(jax.devices())} "
+          f"{jax.devices()[0].platform} device(s) ({args.solver}, rtol=atol="
           f"{args.rtol:g}): {run_s:.3f} s, {jax_rate:,.0f} walker-steps/s "
           f"(compile {compile_s:.1f} s, success {res['success_rate']:.1%})")
     print(f"scipy   {nsc} walkers x {args.steps} steps ({args.scipy_method}): {sc_s:.3f} s, "
