@@ -81,12 +81,14 @@ class CompassGait(WalkerModel):
     def points(self, q):
         """Positions (world frame, stance foot at the origin) of the stance-leg mass, hip,
         swing-leg mass and swing foot: a dict of 2-vectors (thesis 3.3, appendix C.2)."""
-        q1, q2 = q[0], q[1]
-        hip = self.l * jnp.stack([-trig.sin(q1), trig.cos(q1)])
-        down2 = jnp.stack([trig.sin(q2), -trig.cos(q2)])
+        s1, c1 = trig.sin_cos(q[0])
+        s2, c2 = trig.sin_cos(q[1])
+        up1 = jnp.stack([-s1, c1])  # unit vector from the stance foot to the hip
+        down2 = jnp.stack([s2, -c2])  # unit vector from the hip to the swing foot
+        hip = self.l * up1
         return {
             "stance_foot": jnp.zeros(2, hip.dtype),
-            "stance_mass": self.b * jnp.stack([-trig.sin(q1), trig.cos(q1)]),
+            "stance_mass": self.b * up1,
             "hip": hip,
             "swing_mass": hip + self.a * down2,
             "swing_foot": hip + self.l * down2,
@@ -101,10 +103,8 @@ class CompassGait(WalkerModel):
         stance foot translates (extended coordinates of thesis 3.19-3.22)."""
         v0 = _zeros2(q) if base_velocity is None else base_velocity
 
-        def vel(name):
-            return jax.jvp(lambda qq: self.points(qq)[name], (q,), (dq,))[1] + v0
-
-        v1, vH, v2 = vel("stance_mass"), vel("hip"), vel("swing_mass")
+        _, v = jax.jvp(self.points, (q,), (dq,))
+        v1, vH, v2 = v["stance_mass"] + v0, v["hip"] + v0, v["swing_mass"] + v0
         return 0.5 * (self.m1 * v1 @ v1 + self.mH * vH @ vH + self.m2 * v2 @ v2)
 
     def potential_energy(self, q):

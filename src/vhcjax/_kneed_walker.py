@@ -83,10 +83,10 @@ class KneedWalker(MultiDomainModel):
     # ---- kinematics -------------------------------------------------------------------
     def points(self, q):
         """World positions (stance foot at the origin) of the masses, hip, knee and feet."""
-        q1, q2, q3 = q[0], q[1], q[2]
-        up1 = jnp.stack([-trig.sin(q1), trig.cos(q1)])
-        d2 = jnp.stack([trig.sin(q2), -trig.cos(q2)])
-        d3 = jnp.stack([trig.sin(q3), -trig.cos(q3)])
+        (s1, c1), (s2, c2), (s3, c3) = (trig.sin_cos(q[i]) for i in range(3))
+        up1 = jnp.stack([-s1, c1])
+        d2 = jnp.stack([s2, -c2])
+        d3 = jnp.stack([s3, -c3])
         hip = self.L * up1
         knee = hip + self.lt * d2
         return {

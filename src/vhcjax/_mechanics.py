@@ -50,8 +50,8 @@ def coriolis_matrix(model, q, dq):
     return 0.5 * (term1 + term2 - term3)
 
 
-def bias_forces(model, q, dq):
-    """$C(q,\\dot q)\\dot q + G(q)$ computed without forming $C$.
+def coriolis_product(model, q, dq):
+    """$C(q,\\dot q)\\dot q$ computed without forming $C$ (no gravity).
 
     $C\\dot q = \\dot M \\dot q - \\tfrac12 \\partial_q(\\dot q^T M \\dot q)$, with both terms by
     forward/reverse autodiff of the kinetic energy.
@@ -62,7 +62,12 @@ def bias_forces(model, q, dq):
 
     _, mdot_dq = jax.jvp(momentum, (q,), (dq,))
     dK_dq = jax.grad(lambda qq: model.kinetic_energy(qq, dq))(q)
-    return mdot_dq - dK_dq + gravity_vector(model, q)
+    return mdot_dq - dK_dq
+
+
+def bias_forces(model, q, dq):
+    """$C(q,\\dot q)\\dot q + G(q)$ (thesis 3.7), without forming $C$."""
+    return coriolis_product(model, q, dq) + gravity_vector(model, q)
 
 
 def solve_small(A, b):
@@ -76,6 +81,13 @@ def solve_small(A, b):
         det = A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
         return jnp.stack([A[1, 1] * b[0] - A[0, 1] * b[1], A[0, 0] * b[1] - A[1, 0] * b[0]]) / det
     return jnp.linalg.solve(A, b)
+
+
+def det_small(A):
+    """$\\det A$; for 2x2 by the explicit formula (see `solve_small`), else `jnp.linalg.det`."""
+    if A.shape == (2, 2):
+        return A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0]
+    return jnp.linalg.det(A)
 
 
 def acceleration(model, q, dq, generalized_force=None):

@@ -34,7 +34,7 @@ def constraint(theta, phi, dphi):
 
 def velocity_product(model, q, v):
     """$C(q, v)v$: the Coriolis/centrifugal term, quadratic in $v$ (no gravity)."""
-    return mech.bias_forces(model, q, v) - mech.gravity_vector(model, q)
+    return mech.coriolis_product(model, q, v)
 
 
 def reduced_coefficients(model, theta, phi, dphi, ddphi):
@@ -78,14 +78,13 @@ def phi_second_derivative(model, E0, theta, phi, dphi):
     linear system (zero where the ODE is singular).
     """
     q, dPhi = constraint(theta, phi, dphi)
-    n = q.shape[0]
     M = mech.mass_matrix(model, q)
-    dtheta_sq = theta_dot_squared(model, E0, theta, phi, dphi)
-    A = jnp.concatenate([(M @ dPhi)[:, None], M[:, 1:] * dtheta_sq], axis=1)
+    M_dPhi = M @ dPhi
+    dtheta_sq = 2.0 * (E0 - model.potential_energy(q)) / (dPhi @ M_dPhi)  # (5.18)
+    A = jnp.concatenate([M_dPhi[:, None], M[:, 1:] * dtheta_sq], axis=1)
     rhs = -dtheta_sq * velocity_product(model, q, dPhi) - mech.gravity_vector(model, q)
-    sol = jnp.linalg.solve(A, rhs)
-    del n
-    return sol[1:], sol[0], dtheta_sq, jnp.linalg.det(A)
+    sol = mech.solve_small(A, rhs)
+    return sol[1:], sol[0], dtheta_sq, mech.det_small(A)
 
 
 def phi_vector_field(theta, y, args):
