@@ -21,6 +21,7 @@ Both return the same `Gait` pytree and never raise under `jit`/`vmap`: inspect `
 """
 
 import math
+from typing import NamedTuple
 
 import diffrax
 import equinox as eqx
@@ -125,36 +126,63 @@ def impact_velocity_matrix(model, q_minus):
     return jax.jacfwd(dq_plus)(jnp.zeros(n, dtype=q_minus.dtype))
 
 
-def velocity_relations(model, a, b, d):
-    """$(f, h)$ from $(a, b, d)$ (thesis 5.9), derived from the impact map: solve
-    $b = P_{11} d + P_{12} h$ for $h$, then $f = P_{21} d + P_{22} h$."""
-    _, q_minus = impact_configuration(model, a)
-    P = impact_velocity_matrix(model, q_minus)
+class _ImpactData(NamedTuple):
+    """What (5.5)-(5.9) fix from $a$ alone: $q^+$, $q^-$ and $P(q^-)$."""
+
+    q_plus: jax.Array
+    q_minus: jax.Array
+    P: jax.Array
+
+
+def _impact_data(model, a):
+    q_plus, q_minus = impact_configuration(model, a)
+    return _ImpactData(q_plus, q_minus, impact_velocity_matrix(model, q_minus))
+
+
+def _relations(data, b, d):
+    P = data.P
     h = (b - P[0, 0] * d) / P[0, 1]
     f = P[1, 0] * d + P[1, 1] * h
     return f, h
 
 
-def _states(model, a, b, d):
-    q_plus, q_minus = impact_configuration(model, a)
-    f, h = velocity_relations(model, a, b, d)
-    x_plus = jnp.concatenate([q_plus, jnp.stack([b, f])])
-    x_minus = jnp.concatenate([q_minus, jnp.stack([d, h])])
+def velocity_relations(model, a, b, d):
+    """$(f, h)$ from $(a, b, d)$ (thesis 5.9), derived from the impact map: solve
+    $b = P_{11} d + P_{12} h$ for $h$, then $f = P_{21} d + P_{22} h$."""
+    return _relations(_impact_data(model, a), b, d)
+
+
+def _states_from(data, b, d):
+    f, h = _relations(data, b, d)
+    x_plus = jnp.concatenate([data.q_plus, jnp.stack([b, f])])
+    x_minus = jnp.concatenate([data.q_minus, jnp.stack([d, h])])
     return x_plus, x_minus
+
+
+def _states(model, a, b, d):
+    return _states_from(_impact_data(model, a), b, d)
+
+
+def _energy_gap(model, data, b, d):
+    x_plus, x_minus = _states_from(data, b, d)
+    return model.energy(x_minus) - model.energy(x_plus)
 
 
 def energy_gap(model, a, b, d):
     """$E(c, d) - E(a, b)$ with $c, e, f, g, h$ eliminated (thesis 5.12-5.13)."""
-    x_plus, x_minus = _states(model, a, b, d)
-    return model.energy(x_minus) - model.energy(x_plus)
+    return _energy_gap(model, _impact_data(model, a), b, d)
+
+
+def _quadratic(model, data, b):
+    one = jnp.ones_like(jnp.asarray(b, dtype=float))
+    fm, f0, fp = (_energy_gap(model, data, b, s * one) for s in (-1.0, 0.0, 1.0))
+    return 0.5 * (fp + fm) - f0, 0.5 * (fp - fm), f0
 
 
 def quadratic_coefficients(model, a, b):
     """$(A, B, C)$ of $A d^2 + B d + C = E(c, d) - E(a, b)$ (thesis 5.13-5.14), from the
     energy difference at $d = -1, 0, 1$ (exact: it is a quadratic in $d$)."""
-    one = jnp.ones_like(jnp.asarray(a, dtype=float))
-    fm, f0, fp = (energy_gap(model, a, b, s * one) for s in (-1.0, 0.0, 1.0))
-    return 0.5 * (fp + fm) - f0, 0.5 * (fp - fm), f0
+    return _quadratic(model, _impact_data(model, a), b)
 
 
 def family_sign(family):
@@ -172,8 +200,12 @@ def solve_for_d(model, a, b, family):
     """$d$ from (5.13): `"stable"` = thesis selector 2 ($-\\sqrt{}$, 7.3), `"unstable"` =
     selector 1 ($+\\sqrt{}$, 7.8); `family` may also be that sign. **Returns:** `(d, real)`
     where `real` is False when $B^2 - 4AC < 0$ (then `d` is the vertex $-B/2A$)."""
+    return _solve_for_d(model, _impact_data(model, a), b, family)
+
+
+def _solve_for_d(model, data, b, family):
     sign = family_sign(family)
-    A, B, C = quadratic_coefficients(model, a, b)
+    A, B, C = _quadratic(model, data, b)
     disc = B**2 - 4 * A * C
     root = jnp.sqrt(jnp.maximum(disc, 0.0))
     return (-B + sign * root) / (2 * A), disc >= 0
@@ -206,15 +238,16 @@ def vhc_boundary(model, ab, family, config=VHC_CONFIG):
     """Integrate $\\phi'' = f_0$ (5.19) over $\\theta \\in [a, c]$ for given $(a, b)$; the
     residual of Problem 1 (5.20) and the data of the candidate gait."""
     a, b = ab[0], ab[1]
-    d, real = solve_for_d(model, a, b, family)
-    return _boundary_abd(model, a, b, d, real, config)
+    data = _impact_data(model, a)
+    d, real = _solve_for_d(model, data, b, family)
+    return _boundary_abd(model, a, b, d, real, config, data)
 
 
-def _boundary_abd(model, a, b, d, real=True, config=VHC_CONFIG):
+def _boundary_abd(model, a, b, d, real=True, config=VHC_CONFIG, data=None):
     """`vhc_boundary` for a given $d$ (not necessarily a root of 5.13)."""
     real = jnp.asarray(real)
     d = jnp.where(real, d, -1.0)  # keep the arithmetic finite on failure
-    x_plus, x_minus = _states(model, a, b, d)
+    x_plus, x_minus = _states_from(_impact_data(model, a) if data is None else data, b, d)
     E0 = model.energy(x_plus)
     n = model.n_dof
     e, f = x_plus[1], x_plus[n + 1]
