@@ -7,7 +7,7 @@ tolerances) solves the same problems one by one on at most `--scipy-max` members
 is linear in B); throughput is gaits per second of run time, compile time reported
 separately (first call minus a warm call).
 
-    python benchmarks/bench_gait_search.py [--quick] [--json OUT]
+    python benchmarks/bench_gait_search.py [--cpu-devices 2] [--quick] [--json OUT]
 """
 
 import argparse
@@ -32,8 +32,13 @@ def main(argv=None):
     ap.add_argument("--scipy-max", type=int, default=20, help="members solved by scipy (20)")
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--quick", action="store_true", help="B = 1, 10 only; 3 scipy members")
+    ap.add_argument("--cpu-devices", type=int, default=1,
+                    help="split each batch over this many CPU devices (XLA host devices)")
     ap.add_argument("--json", metavar="OUT")
     args = ap.parse_args(argv)
+    if args.cpu_devices > 1:  # must be set before JAX starts its CPU backend
+        os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") +
+                                   f" --xla_force_host_platform_device_count={args.cpu_devices}")
     if args.quick:
         args.sizes, args.scipy_max, args.repeats = "1,10", 3, 1
 
@@ -100,7 +105,7 @@ def main(argv=None):
                   f"scipy {row['scipy_gaits_per_s']:7.2f} gaits/s (success "
                   f"{row['scipy_success']:.2f})  ratio {row['ratio']:8.1f}  "
                   f"max |diff| {row['max_diff_vs_scipy']}", flush=True)
-    info = dict(device=str(jax.devices()[0]), cpus=os.cpu_count(), python=platform.python_version(),
+    info = dict(device=str(jax.devices()[0]), num_devices=len(jax.devices()), cpus=os.cpu_count(), python=platform.python_version(),
                 jax=jax.__version__)
     if args.json:
         with open(args.json, "w") as fh:

@@ -89,6 +89,9 @@ def _family_multipliers_padded(model, psis, zs, config):
     return jax.vmap(lambda p, z: _gait_multipliers(with_slope(model, p), z, config))(psis, zs)
 
 
+_MAX_CHUNK = 256
+
+
 def _bucket(n):
     """Batch sizes that share a compilation: 8, 64, then multiples of 256."""
     return 8 if n <= 8 else 64 if n <= 64 else 256 * -(-n // 256)
@@ -100,13 +103,20 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, mesh=None):
     `psis` (B,) in rad, `zs` (B, 2n-1) the gaits there. Returns a batched
     `GaitMultipliers`. The batch is padded (copies of the first member) to 8, 64 or a
     multiple of 256, so that every batch size up to the bucket shares one compilation:
-    tracing the transverse linearization through diffrax costs far more than running it.
+    tracing the transverse linearization through diffrax costs far more than running it;
+    batches above 256 run as a host loop over chunks of 256.
     Batches above one member are split over the devices of `mesh` (default: all local
     devices).
     """
     psis = jnp.atleast_1d(jnp.asarray(psis, float))
     zs = jnp.asarray(zs, float).reshape(psis.shape[0], -1)
     n = psis.shape[0]
+    if n > _MAX_CHUNK:
+        # Host loop over chunks: one dispatch of 1,024 members hung inside the XLA CPU
+        # runtime (all threads idle; as for `find_gaits`); 256 runs reliably.
+        parts = [family_multipliers(model, psis[i : i + _MAX_CHUNK], zs[i : i + _MAX_CHUNK],
+                                    config, mesh=mesh) for i in range(0, n, _MAX_CHUNK)]
+        return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
     n_dev = device_multiple(mesh)
     pad = (_bucket(n) if n == 1 else -(-_bucket(n) // n_dev) * n_dev) - n
     psis = jnp.concatenate([psis, jnp.broadcast_to(psis[:1], (pad,))])
