@@ -183,3 +183,18 @@ def test_A_equals_finite_differences_of_full_dynamics(gaits, mults, index):
         # the directional derivative (6.18) equals d/d(dtheta) over 2 dtheta
         rates0 = _transverse_rates(m, E0, th, dth, phi, dphi, jnp.zeros(3))
         np.testing.assert_allclose(rates0, 0.0, atol=1e-9)
+
+
+def test_large_batches_run_in_chunks_with_the_same_results(gaits, mults, monkeypatch):
+    """Batches above `_MAX_CHUNK` run as host-side chunks (a 1,024 batch hung in the XLA
+    CPU runtime): with the chunk size set to 4, the 6 slopes run as 4 + 2, each padded to
+    the bucket of 8 (the compiled program of `mults`), and give the unchunked results."""
+    psis, zs, _ = gaits
+    monkeypatch.setattr(S, "_MAX_CHUNK", 4)
+    chunked = S.family_multipliers(CompassGait(), jnp.asarray(psis), jnp.asarray(zs))
+    assert chunked.transverse.shape == mults.transverse.shape == (6, 3)
+    np.testing.assert_array_equal(np.asarray(chunked.result._value), np.asarray(mults.result._value))
+    np.testing.assert_allclose(np.asarray(chunked.transverse), np.asarray(mults.transverse),
+                               rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(np.asarray(chunked.poincare), np.asarray(mults.poincare),
+                               rtol=1e-12, atol=1e-14)
