@@ -574,8 +574,9 @@ def shooting_search(
     n = model.n_dof
     a, b = x_plus[0], x_plus[n]
     sign = family_sign(family)
-    d_fam, _ = solve_for_d(model, a, b, sign)
-    d_oth, _ = solve_for_d(model, a, b, -sign)
+    data = _impact_data(model, a)
+    d_fam, _ = _solve_for_d(model, data, b, sign)
+    d_oth, _ = _solve_for_d(model, data, b, -sign)
     d = x_minus[n]
     wrong = jnp.abs(d - d_oth) < jnp.abs(d - d_fam)
     code = RESULTS.where((code == RESULTS.successful) & wrong, RESULTS.other_cycle, code)
