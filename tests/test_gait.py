@@ -138,6 +138,22 @@ def test_batch_equals_unbatched_and_flags_hopeless(gaits):
     assert np.all(np.isfinite(np.asarray(b.x_plus)))  # never a silent NaN
 
 
+def test_large_batches_run_in_chunks_with_the_same_results(monkeypatch):
+    """Batches above `_MAX_CHUNK` run as host-side chunks (a 1,024 batch hung in the XLA
+    CPU runtime): with the chunk size set to 2, four members run as 2 + 2, each padded to
+    the bucket of 8 (one compiled program), and give the unchunked results and codes."""
+    m = vj.CompassGait()
+    guesses = jnp.array([[0.20, -1.0], [0.20, -1.0], [2.5, 8.0], [0.2, 0.0]])
+    psi = jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0]))
+    whole = _gait.find_gaits(m, guesses, "stable", psi=psi)
+    monkeypatch.setattr(_gait, "_MAX_CHUNK", 2)
+    chunked = _gait.find_gaits(m, guesses, "stable", psi=psi)
+    assert vj.result_names(chunked.result) == vj.result_names(whole.result)
+    assert chunked.x_plus.shape == whole.x_plus.shape == (4, 4)
+    np.testing.assert_allclose(np.asarray(chunked.x_plus), np.asarray(whole.x_plus), rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(np.asarray(chunked.T), np.asarray(whole.T), rtol=1e-12)
+
+
 def test_batch_over_model_parameters():
     masses = jnp.array([10.0, 12.0])
     m = vj.CompassGait(mH=masses)

@@ -20,7 +20,7 @@ import numpy as np
 from ._bisection import bisect_threshold
 from ._hybrid import FAST_CONFIG
 from ._recovery import CONVERGED, recover
-from ._sharding import device_multiple, shard_batch
+from ._sharding import round_to_devices, shard_batch
 
 SECTION_NAMES = ("q1", "dq1", "dq2")
 BASIN_CONFIG = FAST_CONFIG
@@ -47,8 +47,7 @@ def classify_section_points(model, z_star, z, *, num_steps=50, tol=1e-4, chunk=1
     """
     z = np.asarray(z, dtype=float)
     n = z.shape[0]
-    n_dev = device_multiple(mesh)
-    chunk = -(-chunk // n_dev) * n_dev
+    chunk = round_to_devices(chunk, mesh)
     out = {k: [] for k in ("label", "steps", "period", "result", "z_final")}
     starts = range(0, n, chunk)
     for s in progress(starts) if progress is not None else starts:

@@ -32,7 +32,7 @@ import optimistix as optx
 from . import _poincare
 from ._hybrid import DEFAULT_CONFIG, SolverConfig, _step
 from ._results import RESULTS
-from ._sharding import device_multiple, shard_batch
+from ._sharding import MAX_DISPATCH, in_chunks, round_to_devices, shard_batch
 from ._vhc import phi_second_derivative
 
 FAMILIES = ("stable", "unstable")
@@ -240,14 +240,14 @@ def vhc_boundary(model, ab, family, config=VHC_CONFIG):
     a, b = ab[0], ab[1]
     data = _impact_data(model, a)
     d, real = _solve_for_d(model, data, b, family)
-    return _boundary_abd(model, a, b, d, real, config, data)
+    return _boundary_abd(model, data, a, b, d, real, config)
 
 
-def _boundary_abd(model, a, b, d, real=True, config=VHC_CONFIG, data=None):
+def _boundary_abd(model, data, a, b, d, real, config):
     """`vhc_boundary` for a given $d$ (not necessarily a root of 5.13)."""
     real = jnp.asarray(real)
     d = jnp.where(real, d, -1.0)  # keep the arithmetic finite on failure
-    x_plus, x_minus = _states_from(_impact_data(model, a) if data is None else data, b, d)
+    x_plus, x_minus = _states_from(data, b, d)
     E0 = model.energy(x_plus)
     n = model.n_dof
     e, f = x_plus[1], x_plus[n + 1]
@@ -776,7 +776,7 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
 # Batches
 # ---------------------------------------------------------------------------------------
 _BUCKETS = (1, 8, 64, 256)
-_MAX_CHUNK = 256
+_MAX_CHUNK = MAX_DISPATCH
 
 
 def _bucket(n):
@@ -841,25 +841,21 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     if not sizes:
         raise ValueError("find_gaits needs a batch: guesses, psi or batched model parameters")
     B = max(sizes)
-    if B > _MAX_CHUNK:
-        # Host loop over chunks of _MAX_CHUNK: a single vmapped Newton batch of 1,024 hung
-        # inside the XLA CPU runtime (all threads idle); 256 runs reliably.
-        def part(x, i):
+    if B > _MAX_CHUNK:  # see `_sharding.MAX_DISPATCH`
+        def part(x, i, j):
             if eqx.is_array(x) and jnp.ndim(x) > 0:
-                return jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])[i : i + _MAX_CHUNK]
+                return jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])[i:j]
             return x
 
-        chunks = [
-            find_gaits(
-                jax.tree_util.tree_map(lambda x: part(x, i), model),
-                None if guesses is None else part(guesses, i),
+        return in_chunks(
+            lambda i, j: find_gaits(
+                jax.tree_util.tree_map(lambda x: part(x, i, j), model),
+                None if guesses is None else part(guesses, i, j),
                 family, method, solver=solver, mesh=mesh,
-            )
-            for i in range(0, B, _MAX_CHUNK)
-        ]
-        return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *chunks)
-    n_dev = device_multiple(mesh)
-    P = _bucket(B) if B == 1 else -(-_bucket(B) // n_dev) * n_dev
+            ),
+            B, _MAX_CHUNK,
+        )
+    P = _bucket(B) if B == 1 else round_to_devices(_bucket(B), mesh)
 
     def pad(x):
         x = jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])

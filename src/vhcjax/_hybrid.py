@@ -18,7 +18,7 @@ import optimistix as optx
 
 from . import trig
 from ._results import RESULTS
-from ._sharding import device_multiple, shard_batch
+from ._sharding import round_to_devices, shard_batch
 
 
 class SolverConfig(NamedTuple):
@@ -364,8 +364,7 @@ def simulate_batch(model, x0, num_steps, *, config=DEFAULT_CONFIG, mesh=None):
             f"x0 must have shape (batch, {2 * model.n_dof}) with batch >= 1, got {x0.shape}"
         )
     n = x0.shape[0]
-    multiple = device_multiple(mesh)
-    pad = -(-n // multiple) * multiple - n
+    pad = round_to_devices(n, mesh) - n
     if pad:
         x0 = jnp.concatenate([x0, jnp.repeat(x0[-1:], pad, axis=0)])
     sim = _simulate_many(model, shard_batch(x0, mesh), num_steps, config)

@@ -89,3 +89,22 @@ def shard_batch(tree, mesh=None):
 def device_multiple(mesh=None):
     """Number of devices a batch should be a multiple of (1 on a single device)."""
     return (default_mesh() if mesh is None else mesh).devices.size
+
+
+def round_to_devices(n, mesh=None):
+    """`n` rounded up to a multiple of the device count of `mesh`."""
+    k = device_multiple(mesh)
+    return -(-n // k) * k
+
+
+#: Largest batch handed to one vmapped Newton / linearization program: one dispatch of
+#: 1,024 members hung inside the XLA CPU runtime (all threads idle, reproducible, not
+#: cured by `--xla_cpu_multi_thread_eigen=false`); 256 runs reliably.
+MAX_DISPATCH = 256
+
+
+def in_chunks(fn, n, chunk):
+    """`fn(i, j)` on the slices `[i, j)` of a batch of `n`, `chunk` at a time, results
+    concatenated along the batch axis (a host loop: each call is one dispatch)."""
+    parts = [fn(i, min(i + chunk, n)) for i in range(0, n, chunk)]
+    return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)

@@ -29,7 +29,7 @@ from ._hybrid import DEFAULT_CONFIG, FAST_CONFIG, _solver, _step, simulate
 from . import _poincare
 from ._poincare import fixed_point, jacobian, step_map
 from ._results import RESULTS
-from ._sharding import device_multiple, shard_batch
+from ._sharding import MAX_DISPATCH, in_chunks, round_to_devices, shard_batch
 from ._transverse import TransverseLinearization, transverse_linearization
 
 #: Stable and unstable period-1 gaits of the default compass gait at 3 degrees
@@ -89,7 +89,7 @@ def _family_multipliers_padded(model, psis, zs, config):
     return jax.vmap(lambda p, z: _gait_multipliers(with_slope(model, p), z, config))(psis, zs)
 
 
-_MAX_CHUNK = 256
+_MAX_CHUNK = MAX_DISPATCH
 
 
 def _bucket(n):
@@ -111,14 +111,10 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, mesh=None):
     psis = jnp.atleast_1d(jnp.asarray(psis, float))
     zs = jnp.asarray(zs, float).reshape(psis.shape[0], -1)
     n = psis.shape[0]
-    if n > _MAX_CHUNK:
-        # Host loop over chunks: one dispatch of 1,024 members hung inside the XLA CPU
-        # runtime (all threads idle; as for `find_gaits`); 256 runs reliably.
-        parts = [family_multipliers(model, psis[i : i + _MAX_CHUNK], zs[i : i + _MAX_CHUNK],
-                                    config, mesh=mesh) for i in range(0, n, _MAX_CHUNK)]
-        return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
-    n_dev = device_multiple(mesh)
-    pad = (_bucket(n) if n == 1 else -(-_bucket(n) // n_dev) * n_dev) - n
+    if n > _MAX_CHUNK:  # see `_sharding.MAX_DISPATCH`
+        return in_chunks(lambda i, j: family_multipliers(model, psis[i:j], zs[i:j], config,
+                                                         mesh=mesh), n, _MAX_CHUNK)
+    pad = (_bucket(n) if n == 1 else round_to_devices(_bucket(n), mesh)) - n
     psis = jnp.concatenate([psis, jnp.broadcast_to(psis[:1], (pad,))])
     zs = jnp.concatenate([zs, jnp.broadcast_to(zs[:1], (pad, zs.shape[1]))])
     psis, zs = shard_batch((psis, zs), mesh)
@@ -457,7 +453,7 @@ def bifurcation_diagram(psis, zs, *, model=None, num_transient=300, num_record=6
         sl = slice(i, min(i + chunk, n))
         ps, xs = psis[sl], x0s[sl]
         k = len(ps)
-        pad = -(-k // device_multiple(mesh)) * device_multiple(mesh) - k
+        pad = round_to_devices(k, mesh) - k
         ps = np.concatenate([ps, np.repeat(ps[-1:], pad)])
         xs = np.concatenate([xs, np.repeat(xs[-1:], pad, axis=0)])
         p, r = _long_runs(model, *shard_batch((jnp.asarray(ps), jnp.asarray(xs)), mesh),

@@ -32,11 +32,6 @@ def constraint(theta, phi, dphi):
     return q, dq_dtheta
 
 
-def velocity_product(model, q, v):
-    """$C(q, v)v$: the Coriolis/centrifugal term, quadratic in $v$ (no gravity)."""
-    return mech.coriolis_product(model, q, v)
-
-
 def reduced_coefficients(model, theta, phi, dphi, ddphi):
     """$(\\alpha, \\beta, \\gamma)$ of the n reduced equations (thesis 2.50; 4.6 for n = 2).
 
@@ -47,7 +42,7 @@ def reduced_coefficients(model, theta, phi, dphi, ddphi):
     ddPhi = jnp.concatenate([jnp.zeros((1,), q.dtype), jnp.atleast_1d(ddphi)])
     M = mech.mass_matrix(model, q)
     alpha = M @ dPhi
-    beta = M @ ddPhi + velocity_product(model, q, dPhi)
+    beta = M @ ddPhi + mech.coriolis_product(model, q, dPhi)
     gamma = mech.gravity_vector(model, q)
     return alpha, beta, gamma
 
@@ -66,8 +61,12 @@ def reduced_energy(model, theta, dtheta, phi, dphi):
 
 def theta_dot_squared(model, E0, theta, phi, dphi):
     """$\\dot\\theta^2$ from the energy relation (thesis 5.18)."""
-    q, _ = constraint(theta, phi, dphi)
-    return 2.0 * (E0 - model.potential_energy(q)) / reduced_mass(model, theta, phi, dphi)
+    q, dPhi = constraint(theta, phi, dphi)
+    return _theta_dot_squared(model, E0, q, dPhi @ mech.mass_matrix(model, q) @ dPhi)
+
+
+def _theta_dot_squared(model, E0, q, M_theta):
+    return 2.0 * (E0 - model.potential_energy(q)) / M_theta
 
 
 def phi_second_derivative(model, E0, theta, phi, dphi):
@@ -80,9 +79,9 @@ def phi_second_derivative(model, E0, theta, phi, dphi):
     q, dPhi = constraint(theta, phi, dphi)
     M = mech.mass_matrix(model, q)
     M_dPhi = M @ dPhi
-    dtheta_sq = 2.0 * (E0 - model.potential_energy(q)) / (dPhi @ M_dPhi)  # (5.18)
+    dtheta_sq = _theta_dot_squared(model, E0, q, dPhi @ M_dPhi)  # (5.18), M computed once
     A = jnp.concatenate([M_dPhi[:, None], M[:, 1:] * dtheta_sq], axis=1)
-    rhs = -dtheta_sq * velocity_product(model, q, dPhi) - mech.gravity_vector(model, q)
+    rhs = -dtheta_sq * mech.coriolis_product(model, q, dPhi) - mech.gravity_vector(model, q)
     sol = mech.solve_small(A, rhs)
     return sol[1:], sol[0], dtheta_sq, mech.det_small(A)
 
@@ -109,7 +108,7 @@ def theta_dynamics_coefficients(model, theta, phi, dphi):
     q, dPhi = constraint(theta, phi, dphi)
     M = mech.mass_matrix(model, q)
     w = jnp.linalg.solve(M.T, jnp.eye(q.shape[0], dtype=q.dtype)[0])
-    beta0 = w @ velocity_product(model, q, dPhi)
+    beta0 = w @ mech.coriolis_product(model, q, dPhi)
     gamma0 = w @ mech.gravity_vector(model, q)
     return jnp.ones_like(beta0), beta0, gamma0
 
