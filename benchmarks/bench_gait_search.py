@@ -105,8 +105,13 @@ def main(argv=None):
                   f"scipy {row['scipy_gaits_per_s']:7.2f} gaits/s (success "
                   f"{row['scipy_success']:.2f})  ratio {row['ratio']:8.1f}  "
                   f"max |diff| {row['max_diff_vs_scipy']}", flush=True)
-    info = dict(device=str(jax.devices()[0]), num_devices=len(jax.devices()), cpus=os.cpu_count(), python=platform.python_version(),
-                jax=jax.__version__)
+    from vhcjax import _compile
+
+    info = dict(device=str(jax.devices()[0]), num_devices=len(jax.devices()), cpus=os.cpu_count(),
+                python=platform.python_version(), jax=jax.__version__,
+                compiler_options=_compile.compiler_options())
+    print(f"XLA compile options of vhcjax: {info['compiler_options']} "
+          "(VHCJAX_XLA_OPTIONS=0 for XLA's defaults)")
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(dict(info=info, rows=rows), fh, indent=1)

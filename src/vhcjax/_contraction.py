@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._compile import filter_jit
 from ._hybrid import DEFAULT_CONFIG
 from ._poincare import jacobian
 from ._recovery import recover
@@ -118,12 +119,12 @@ def contraction(model, z_star, *, num_perturbations=32, scale=1e-3, num_steps=30
     )
 
 
-@eqx.filter_jit
+@filter_jit
 def _jacobian_jit(model, z, config):
     return jacobian(model, z, 1, config)
 
 
-@eqx.filter_jit
+@filter_jit
 def _recover_jit(model, x0, x_star, num_steps, config):
     # tol=0: nobody "converges", every recovery runs all steps (a full error history).
     return recover(model, x0, x_star, num_steps, tol=0.0, config=config,

@@ -16,6 +16,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from ._compile import filter_jit
 from . import trig
 from ._results import RESULTS
 from ._sharding import round_to_devices, shard_batch
@@ -330,12 +331,12 @@ def simulate(model, x0, num_steps, *, config=DEFAULT_CONFIG, dense_points=0, thr
 
 # The public entry points are jitted once here (models carry array leaves, so one
 # compilation serves every parameter value); every caller shares these caches.
-step = eqx.filter_jit(step)
-simulate = eqx.filter_jit(simulate)
+step = filter_jit(step)
+simulate = filter_jit(simulate)
 simulate_jit = simulate
 
 
-@eqx.filter_jit
+@filter_jit
 def _simulate_many(model, x0, num_steps, config):
     return jax.vmap(lambda x: _simulate(model, x, num_steps, config))(x0)
 

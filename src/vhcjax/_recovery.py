@@ -13,6 +13,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from ._compile import filter_jit
 from . import trig
 from ._hybrid import FAST_CONFIG, _step
 from ._results import RESULTS
@@ -145,7 +146,7 @@ def _recover(model, x0, x_star, num_steps, tol, cycle_tol, max_period, config, f
     return Recovery(label, steps, period, result, x, dist, times)
 
 
-recover_jit = eqx.filter_jit(recover)
+recover_jit = filter_jit(recover)
 
 
 def label_names(label):

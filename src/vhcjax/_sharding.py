@@ -11,11 +11,12 @@ Several hosts: call `jax.distributed.initialize()` first on each host; `default_
 spans `jax.devices()` (all devices of all hosts) and the same code runs unchanged.
 """
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
+
+from ._compile import filter_jit
 
 
 def default_mesh(devices=None):
@@ -65,7 +66,7 @@ _cache = {}
 def _vmapped(fn):
     # One compiled program per function object (jit caches per input shape/sharding).
     if fn not in _cache:
-        _cache[fn] = eqx.filter_jit(jax.vmap(fn))
+        _cache[fn] = filter_jit(jax.vmap(fn))
     return _cache[fn]
 
 

@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._compile import filter_jit
 from ._hybrid import DEFAULT_CONFIG
 
 
@@ -62,7 +63,7 @@ class SlopeSensitivity(eqx.Module):
     djacobian: jax.Array
 
 
-@eqx.filter_jit
+@filter_jit
 def _implicit(model, z, config):
     # One second-order forward trace over u = (z, psi): the first derivatives of all
     # outputs and the derivatives of the step-map Jacobian J = dP/dz in every direction.

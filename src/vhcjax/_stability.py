@@ -24,6 +24,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from ._compile import filter_jit
 from ._compass_gait import CompassGait
 from ._hybrid import DEFAULT_CONFIG, FAST_CONFIG, _solver, _step, simulate
 from . import _poincare
@@ -84,7 +85,7 @@ def _gait_multipliers(model, z, config=DEFAULT_CONFIG):
     return GaitMultipliers(tl.multipliers, pm, mx, mx < 1.0, sr.period, sr.x_minus, code, tl)
 
 
-@eqx.filter_jit
+@filter_jit
 def _family_multipliers_padded(model, psis, zs, config):
     return jax.vmap(lambda p, z: _gait_multipliers(with_slope(model, p), z, config))(psis, zs)
 
@@ -136,7 +137,7 @@ def gait_multipliers(model, z, config=DEFAULT_CONFIG):
     return jax.tree_util.tree_map(lambda x: x[0], out)
 
 
-_gait_multipliers_jit = eqx.filter_jit(_gait_multipliers)
+_gait_multipliers_jit = filter_jit(_gait_multipliers)
 gait_multipliers_jit = gait_multipliers
 
 
@@ -152,7 +153,7 @@ def finite_difference_jacobian(model, z, k=1, h=1e-6, config=DEFAULT_CONFIG):
     return jax.vmap(col, out_axes=1)(eye)
 
 
-finite_difference_jacobian_jit = eqx.filter_jit(finite_difference_jacobian)
+finite_difference_jacobian_jit = filter_jit(finite_difference_jacobian)
 
 
 # ---- a second Poincare section: q1 = 0 in mid-swing -------------------------------------
@@ -207,7 +208,7 @@ def to_midswing(model, z, config=DEFAULT_CONFIG):
     return xs[1:], ok
 
 
-@eqx.filter_jit
+@filter_jit
 def midswing_multipliers(model, z, config=DEFAULT_CONFIG):
     """Multipliers of the gait through post-impact `z`, computed on the mid-swing section
     $q_1 = 0$ (jacfwd of `midswing_map`). **Returns:** `(multipliers, w, ok)`."""
@@ -221,7 +222,7 @@ def midswing_multipliers(model, z, config=DEFAULT_CONFIG):
 _fixed_point_jit = _poincare.fixed_point_jit
 
 
-@eqx.filter_jit
+@filter_jit
 def _fixed_points_batch(model, psis, z0s, k=1, config=DEFAULT_CONFIG):
     return jax.vmap(lambda p, z: fixed_point(with_slope(model, p), z, k, config=config))(
         psis, z0s)
@@ -413,7 +414,7 @@ class BifurcationDiagram(eqx.Module):
     period_pattern: np.ndarray
 
 
-@eqx.filter_jit
+@filter_jit
 def _long_runs(model, psis, x0s, num_steps, num_record, config):
     def one(p, x0):
         sim = simulate(with_slope(model, p), x0, num_steps, config=config)

@@ -1,0 +1,87 @@
+"""How vhcjax's jitted entry points are compiled: `filter_jit`, `eqx.filter_jit` with
+XLA options chosen for the graphs of this library.
+
+On the CPU backend XLA lowers every fusion through its MLIR "fusion emitters" by default.
+The graphs here are large and deeply nested (Newton over an adaptive ODE solve carrying
+forward-mode tangents, events inside), and for them XLA's older LLVM IR emitters compile
+markedly faster and run as fast or faster (measured on the batched VHC search: XLA
+compile 4.4 s -> 2.6 s, 265 -> 300 gaits/s; run `benchmarks/bench_gait_search.py` with
+`VHCJAX_XLA_OPTIONS=0` to compare). Results agree to rounding (the test suite runs with
+the options on).
+
+The options are used where the backend is CPU and the installed XLA knows them (probed
+once, on the first compile); elsewhere, or with the environment variable
+`VHCJAX_XLA_OPTIONS=0`, `filter_jit` is plain `eqx.filter_jit`.
+"""
+
+import functools
+import os
+
+import equinox as eqx
+import jax
+
+#: XLA compile options for the CPU backend (fields of XLA's `DebugOptions`).
+CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
+
+_chosen = []
+
+
+def compiler_options():
+    """The options `filter_jit` passes to `jax.jit` in this process (`None`: XLA defaults)."""
+    if not _chosen:
+        _chosen.append(_choose())
+    return _chosen[0]
+
+
+def _choose():
+    if os.environ.get("VHCJAX_XLA_OPTIONS", "1") == "0" or jax.default_backend() != "cpu":
+        return None
+    try:  # an XLA that does not know an option rejects it (a Python error, not a crash)
+        jax.jit(lambda x: x + 1, compiler_options=CPU_COMPILER_OPTIONS).lower(1.0).compile()
+    except Exception:  # noqa: BLE001
+        return None
+    return dict(CPU_COMPILER_OPTIONS)
+
+
+def _top_level():
+    """True outside any JAX transformation (only a top-level `jax.jit` takes options)."""
+    try:
+        from jax._src.core import trace_state_clean
+    except ImportError:  # pragma: no cover - a JAX without it: no options when nested
+        return True
+    return trace_state_clean()
+
+
+class _Jit:
+    """`eqx.filter_jit(fun, compiler_options=compiler_options())`, built on first use (so
+    that importing vhcjax does not start a JAX backend). Inside another transformation
+    (a nested call) it is plain `eqx.filter_jit`: the enclosing jit's options apply."""
+
+    def __init__(self, fun, kwargs):
+        self._fun, self._kwargs, self._jitted = fun, kwargs, None
+        self._plain = eqx.filter_jit(fun, **kwargs)
+        functools.update_wrapper(self, fun)
+
+    def _get(self):
+        if not _top_level():
+            return self._plain
+        if self._jitted is None:
+            options = compiler_options()
+            self._jitted = (
+                self._plain if options is None
+                else eqx.filter_jit(self._fun, compiler_options=options, **self._kwargs)
+            )
+        return self._jitted
+
+    def __call__(self, *args, **kwargs):
+        return self._get()(*args, **kwargs)
+
+    def lower(self, *args, **kwargs):
+        return self._get().lower(*args, **kwargs)
+
+
+def filter_jit(fun=None, **kwargs):
+    """`eqx.filter_jit` with vhcjax's compile options; usable as `@filter_jit` too."""
+    if fun is None:
+        return lambda f: _Jit(f, kwargs)
+    return _Jit(fun, kwargs)
