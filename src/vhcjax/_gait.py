@@ -29,11 +29,12 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from ._compile import filter_jit
 from . import _poincare
 from ._hybrid import DEFAULT_CONFIG, SolverConfig, _step
 from ._results import RESULTS
 from ._sharding import MAX_DISPATCH, in_chunks, round_to_devices, shard_batch
-from ._vhc import phi_second_derivative
+from ._vhc import phi_second_derivative, singularity_terms
 
 FAMILIES = ("stable", "unstable")
 METHODS = ("vhc", "shooting")
@@ -174,8 +175,9 @@ def energy_gap(model, a, b, d):
 
 
 def _quadratic(model, data, b):
-    one = jnp.ones_like(jnp.asarray(b, dtype=float))
-    fm, f0, fp = (_energy_gap(model, data, b, s * one) for s in (-1.0, 0.0, 1.0))
+    ds = jnp.array([-1.0, 0.0, 1.0]) * jnp.ones_like(jnp.asarray(b, dtype=float))
+    # One trace of the energies, batched over the three values of d.
+    fm, f0, fp = jax.vmap(lambda d: _energy_gap(model, data, b, d))(ds)
     return 0.5 * (fp + fm) - f0, 0.5 * (fp - fm), f0
 
 
@@ -257,13 +259,13 @@ def _boundary_abd(model, data, a, b, d, real, config):
     ok0 = jnp.isfinite(y0).all()
     y0 = jnp.where(ok0, y0, jnp.array([e, 0.0, 0.0]))
     sign = jnp.sign(b)
-    _, _, dth2_a, det_a = phi_second_derivative(model, E0, a, y0[0:1], y0[1:2])
+    dth2_a, det_a = singularity_terms(model, jax.lax.stop_gradient(E0), a, y0[0:1], y0[1:2])
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(_phi_field),
         _solver(config.solver),
         t0=a,
         t1=c,
-        dt0=None,
+        dt0=(c - a) / 64,
         y0=y0,
         args=(model, E0, sign),
         stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
@@ -273,7 +275,7 @@ def _boundary_abd(model, data, a, b, d, real, config):
         throw=False,
     )
     yc = sol.ys[-1]
-    _, _, dth2_c, det_c = phi_second_derivative(model, E0, c, yc[0:1], yc[1:2])
+    dth2_c, det_c = singularity_terms(model, jax.lax.stop_gradient(E0), c, yc[0:1], yc[1:2])
     residual = jnp.stack([yc[0] - g, yc[1] - h / d])
     singular = (
         ~ok0
@@ -407,64 +409,71 @@ def _label(family):
 
 
 def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10):
-    r"""Newton's method with a forward-mode Jacobian (`jax.linearize`), globalised by
-    Levenberg-Marquardt damping.
+    r"""Newton's method with a forward-mode Jacobian, globalised by Levenberg-Marquardt
+    damping.
 
-    `fn(x) -> (r, aux)`. Each iteration first tries the full Newton step
-    ($\lambda = 0$); if it does not decrease $\|r\|_2$ it retries with
-    $(J^TJ + \lambda I)\Delta x = J^Tr$ and growing $\lambda$ (no new Jacobian), up to
-    `max_trials` times. Near a solution this is plain Newton (quadratic convergence); far
-    from it the damped steps turn toward steepest descent, which lets the VHC search
-    leave the edge of the region where (5.13) has real roots (plain Newton stalls there
-    from the thesis seed (7.2) for the unstable family). Stops when
-    $\|\Delta x\|_\infty < \mathrm{atol} + \mathrm{rtol}\|x\|_\infty$,
-    $\|r\|_\infty < \mathrm{atol}$, or no trial decreases the residual.
+    `fn(x) -> (r, aux)`. Every evaluation is one forward-mode pass (`jax.jacfwd`) that
+    returns $r$, $J$ and `aux` together, so the evaluation that tests a step is also the
+    next iteration's linearisation. From the last accepted point the full Newton step
+    ($\lambda = 0$) is tried first; a step that does not decrease $\|r\|_2$ is retried
+    from the same point with $(J^TJ + \lambda I)\Delta x = J^Tr$ and growing $\lambda$
+    (no new Jacobian), up to `max_trials` times. Near a solution this is plain Newton
+    (quadratic convergence); far from it the damped steps turn toward steepest descent,
+    which lets the VHC search leave the edge of the region where (5.13) has real roots
+    (plain Newton stalls there from the thesis seed (7.2) for the unstable family). Stops
+    when $\|\Delta x\|_\infty < \mathrm{atol} + \mathrm{rtol}\|x\|_\infty$,
+    $\|r\|_\infty < \mathrm{atol}$, no trial decreases the residual, or after `max_steps`
+    accepted steps.
 
-    **Returns:** `(x, r, aux, iterations)` at the last iterate.
+    **Returns:** `(x, r, aux, iterations)` at the last accepted point; `iterations`
+    counts accepted steps.
     """
     n = x0.shape[0]
     eye = jnp.eye(n, dtype=x0.dtype)
-    r_shape, aux_shape = jax.eval_shape(fn, x0)
-    zeros = lambda t: jax.tree_util.tree_map(lambda l: jnp.zeros(l.shape, l.dtype), t)  # noqa: E731
+
+    def r_and_aux(y):
+        r, aux = fn(y)
+        return r, (r, aux)
+
+    def evaluate(x):
+        J, (r, aux) = jax.jacfwd(r_and_aux, has_aux=True)(x)
+        return r, J, aux
 
     def cond(carry):
-        return (carry[4] < max_steps) & ~carry[5]
+        k, trials, done = carry[4], carry[5], carry[6]
+        return (k < max_steps) & (trials < max_trials) & ~done
 
     def body(carry):
-        x, _, _, lam_prev, k, _ = carry
-        r, lin, aux = jax.linearize(fn, x, has_aux=True)
-        J = jax.vmap(lin, out_axes=1)(eye)
-        JtJ, Jtr = J.T @ J, J.T @ r
-        n0 = jnp.sum(r**2)
-        lam_start = jnp.maximum(lam_prev, 1e-3 * jnp.max(jnp.diag(JtJ)))
-
-        def t_cond(c):
-            j, _, rn, _ = c
-            return (j == 0) | ((j < max_trials) & ~(jnp.sum(rn**2) < n0))
-
-        def t_body(c):
-            j = c[0]
-            lam = jnp.where(j == 0, 0.0, lam_start * 10.0 ** (j - 1))
-            A = jnp.where(j == 0, J, JtJ + lam * eye)
-            dx = jnp.linalg.solve(A, jnp.where(j == 0, r, Jtr))
-            dx = jnp.where(jnp.isfinite(dx).all(), dx, jnp.zeros_like(dx))
-            rn, auxn = fn(x - dx)
-            return j + 1, dx, rn, auxn
-
-        j, dx, r_new, aux_new = jax.lax.while_loop(
-            t_cond, t_body, (jnp.array(0), jnp.zeros_like(x), r, aux)
+        x, r, J, aux, k, trials, done, lam = carry
+        first = k < 0  # the first pass only evaluates r, J at the guess
+        # Trial step from the accepted point (x, r, J): Newton, or damped after a failure.
+        JtJ = J.T @ J
+        A = jnp.where(trials == 0, J, JtJ + lam * eye)
+        dx = jnp.linalg.solve(A, jnp.where(trials == 0, r, J.T @ r))
+        dx = jnp.where(jnp.isfinite(dx).all() & ~first, dx, jnp.zeros_like(dx))
+        r_t, J_t, aux_t = evaluate(x - dx)
+        improved = first | (
+            jnp.isfinite(r_t).all() & jnp.isfinite(J_t).all() & (jnp.sum(r_t**2) < jnp.sum(r**2))
         )
-        improved = jnp.isfinite(r_new).all() & (jnp.sum(r_new**2) < n0)
         pick = lambda u, v: jax.tree_util.tree_map(lambda p, q: jnp.where(improved, p, q), u, v)  # noqa: E731
-        x_new, r_new, aux_new = pick(x - dx, x), pick(r_new, r), pick(aux_new, aux)
-        lam_used = jnp.where(j <= 1, 0.0, lam_start * 10.0 ** (j - 2))
-        small = jnp.max(jnp.abs(dx)) < atol + rtol * jnp.max(jnp.abs(x))
-        done = ~improved | small | (jnp.max(jnp.abs(r_new)) < atol)
-        return x_new, r_new, aux_new, 0.1 * lam_used, k + 1, done
+        x_new, r_new, J_new, aux_new = pick((x - dx, r_t, J_t, aux_t), (x, r, J, aux))
+        small = ~first & (jnp.max(jnp.abs(dx)) < atol + rtol * jnp.max(jnp.abs(x)))
+        done = improved & (small | (jnp.max(jnp.abs(r_t)) < atol))
+        # After a failure: grow lambda from a scale of J^T J; after a success: Newton again.
+        lam_start = 1e-3 * jnp.max(jnp.diag(JtJ))
+        lam = jnp.where(improved, 0.0, jnp.where(trials == 0, lam_start, 10.0 * lam))
+        trials = jnp.where(improved, 0, trials + 1)
+        return x_new, r_new, J_new, aux_new, k + improved, trials, done, lam
 
-    init = (x0, zeros(r_shape), zeros(aux_shape), jnp.asarray(0.0, x0.dtype), jnp.array(0),
-            jnp.asarray(False))
-    x, r, aux, _, k, _ = jax.lax.while_loop(cond, body, init)
+    r_shape, aux_shape = jax.eval_shape(fn, x0)
+    # Every carry starts as a function of x0: under `vmap` the loop's carries are then all
+    # batched from the start, and the batching rule traces the (large) body once.
+    tie = jnp.where(x0[0] == x0[0], 0.0, 0.0).astype(x0.dtype)
+    zeros = lambda t: jax.tree_util.tree_map(lambda l: jnp.zeros(l.shape, l.dtype) + tie.astype(l.dtype), t)  # noqa: E731
+    init = (x0, zeros(r_shape), zeros(jax.ShapeDtypeStruct(r_shape.shape + (n,), x0.dtype)),
+            zeros(aux_shape), jnp.array(-1) + tie.astype(int), jnp.array(0) + tie.astype(int),
+            tie != 0, tie)
+    x, r, _, aux, k, _, _, _ = jax.lax.while_loop(cond, body, init)
     return x, r, aux, k
 
 
@@ -593,7 +602,7 @@ def _search(model, guess, sign, method, solver="newton"):
     raise ValueError(f"method must be one of {METHODS}, got {method!r}")
 
 
-_search_jit = eqx.filter_jit(_search)
+_search_jit = filter_jit(_search)
 
 
 def _relabel(gait, family):
@@ -699,7 +708,7 @@ def _continue(start, end, s_buf, n, z0, sign, method):
     return buf, tbuf
 
 
-_continue_jit = eqx.filter_jit(_continue)
+_continue_jit = filter_jit(_continue)
 
 
 def _pow2(n, lo=16):
@@ -792,7 +801,7 @@ def _batched_axes(model):
     )
 
 
-@eqx.filter_jit
+@filter_jit
 def _search_batch(model, guesses, sign, method, solver, axes):
     return eqx.filter_vmap(
         lambda m, g: _search(m, g, sign, method, solver), in_axes=(axes, 0)
@@ -805,7 +814,7 @@ def _from_reference(model, sign, method, num=_HOMOTOPY_STEPS):
     return jax.tree_util.tree_map(lambda x: x[-1], gaits)
 
 
-@eqx.filter_jit
+@filter_jit
 def _from_reference_batch(model, sign, method, num, axes):
     return eqx.filter_vmap(lambda m: _from_reference(m, sign, method, num), in_axes=(axes,))(model)
 

@@ -86,6 +86,19 @@ def phi_second_derivative(model, E0, theta, phi, dphi):
     return sol[1:], sol[0], dtheta_sq, mech.det_small(A)
 
 
+def singularity_terms(model, E0, theta, phi, dphi):
+    r"""$(\dot\theta^2, \det A)$ of `phi_second_derivative` without the forces: where the
+    ODE (5.19) is singular ($\dot\theta^2 \le 0$ or $\det A = 0$). Inputs are
+    `stop_gradient`-ed: a check, not part of any derivative."""
+    theta, phi, dphi = jax.lax.stop_gradient((theta, phi, dphi))
+    q, dPhi = constraint(theta, phi, dphi)
+    M = mech.mass_matrix(model, q)
+    M_dPhi = M @ dPhi
+    dtheta_sq = _theta_dot_squared(model, E0, q, dPhi @ M_dPhi)
+    A = jnp.concatenate([M_dPhi[:, None], M[:, 1:] * dtheta_sq], axis=1)
+    return dtheta_sq, mech.det_small(A)
+
+
 def phi_vector_field(theta, y, args):
     """diffrax vector field in the time-like variable $\\theta$: `y = (phi, dphi)`.
 
