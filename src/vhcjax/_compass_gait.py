@@ -3,7 +3,6 @@
 import math
 from typing import ClassVar
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 
@@ -105,7 +104,9 @@ class CompassGait(WalkerModel):
 
         _, v = jax.jvp(self.points, (q,), (dq,))
         v1, vH, v2 = v["stance_mass"] + v0, v["hip"] + v0, v["swing_mass"] + v0
-        return 0.5 * (self.m1 * v1 @ v1 + self.mH * vH @ vH + self.m2 * v2 @ v2)
+        # Squares summed elementwise, not `v @ v`: under nested autodiff and vmap XLA
+        # compiles every small dot_general as a kernel of its own (slow to compile).
+        return 0.5 * (self.m1 * jnp.sum(v1 * v1) + self.mH * jnp.sum(vH * vH) + self.m2 * jnp.sum(v2 * v2))
 
     def potential_energy(self, q):
         """Gravitational energy (thesis 3.4), zero with both legs vertical, as in (5.10)."""

@@ -44,7 +44,7 @@ class PendulumWalker(CompassGait):
         v0 = jnp.zeros(2, jnp.result_type(q, float)) if base_velocity is None else base_velocity
         vp = jax.jvp(lambda qq: self.points(qq)["pendulum"], (q,), (dq,))[1] + v0
         legs = super().kinetic_energy(q[:2], dq[:2], base_velocity)
-        return legs + 0.5 * self.mp * vp @ vp
+        return legs + 0.5 * self.mp * jnp.sum(vp * vp)
 
     def potential_energy(self, q):
         y = self.points(q)["pendulum"][1] - self.points(jnp.zeros_like(q))["pendulum"][1]
