@@ -22,15 +22,14 @@ def mass_matrix(model, q):
     """$M(q)$: the Hessian of the kinetic energy in $\\dot q$ (exact: $K$ is quadratic)."""
     n = q.shape[0]
     zeros = jnp.zeros(n, q.dtype)
-    # Forward over forward: no transposition, the smallest graph under further autodiff.
-    return jax.jacfwd(jax.jacfwd(lambda dq: model.kinetic_energy(q, dq)))(zeros)
+    return jax.hessian(lambda dq: model.kinetic_energy(q, dq))(zeros)
 
 
 def extended_mass_matrix(model, q):
     """$M_x(q)$ of thesis (3.22): Hessian of $K$ in $(\\dot q, \\dot z)$, stance foot free."""
     n = q.shape[0]
     zeros = jnp.zeros(n + 2, q.dtype)
-    return jax.jacfwd(jax.jacfwd(lambda v: model.kinetic_energy(q, v[:n], v[n:])))(zeros)
+    return jax.hessian(lambda v: model.kinetic_energy(q, v[:n], v[n:]))(zeros)
 
 
 def gravity_vector(model, q):
