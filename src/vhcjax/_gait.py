@@ -259,7 +259,7 @@ def _boundary_abd(model, data, a, b, d, real, config):
     ok0 = jnp.isfinite(y0).all()
     y0 = jnp.where(ok0, y0, jnp.array([e, 0.0, 0.0]))
     sign = jnp.sign(b)
-    dth2_a, det_a = singularity_terms(model, jax.lax.stop_gradient(E0), a, y0[0:1], y0[1:2])
+    dth2_a, det_a = singularity_terms(model, E0, a, y0[0:1], y0[1:2])
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(_phi_field),
         _solver(config.solver),
@@ -275,7 +275,7 @@ def _boundary_abd(model, data, a, b, d, real, config):
         throw=False,
     )
     yc = sol.ys[-1]
-    dth2_c, det_c = singularity_terms(model, jax.lax.stop_gradient(E0), c, yc[0:1], yc[1:2])
+    dth2_c, det_c = singularity_terms(model, E0, c, yc[0:1], yc[1:2])
     residual = jnp.stack([yc[0] - g, yc[1] - h / d])
     singular = (
         ~ok0

@@ -69,33 +69,36 @@ def _theta_dot_squared(model, E0, q, M_theta):
     return 2.0 * (E0 - model.potential_energy(q)) / M_theta
 
 
-def phi_second_derivative(model, E0, theta, phi, dphi):
-    """$\\phi''(\\theta)$ (thesis 5.19), by solving the equations of motion.
-
-    **Returns:** `(ddphi, ddtheta, dtheta_sq, det)`: the constraint curvature (n-1), the
-    acceleration $\\ddot\\theta$, $\\dot\\theta^2$ from the energy, and the determinant of the
-    linear system (zero where the ODE is singular).
-    """
-    q, dPhi = constraint(theta, phi, dphi)
+def _linear_system(model, E0, q, dPhi):
+    r"""$A$ of the equations of motion, linear in $(\ddot\theta, \phi'')$ once
+    $\dot\theta^2$ comes from the energy (5.18); also $M$ and $\dot\theta^2$."""
     M = mech.mass_matrix(model, q)
     M_dPhi = M @ dPhi
     dtheta_sq = _theta_dot_squared(model, E0, q, dPhi @ M_dPhi)  # (5.18), M computed once
     A = jnp.concatenate([M_dPhi[:, None], M[:, 1:] * dtheta_sq], axis=1)
+    return A, dtheta_sq
+
+
+def phi_second_derivative(model, E0, theta, phi, dphi):
+    r"""$\phi''(\theta)$ (thesis 5.19), by solving the equations of motion.
+
+    **Returns:** `(ddphi, ddtheta, dtheta_sq, det)`: the constraint curvature (n-1), the
+    acceleration $\ddot\theta$, $\dot\theta^2$ from the energy, and the determinant of the
+    linear system (zero where the ODE is singular).
+    """
+    q, dPhi = constraint(theta, phi, dphi)
+    A, dtheta_sq = _linear_system(model, E0, q, dPhi)
     rhs = -dtheta_sq * mech.coriolis_product(model, q, dPhi) - mech.gravity_vector(model, q)
     sol = mech.solve_small(A, rhs)
     return sol[1:], sol[0], dtheta_sq, mech.det_small(A)
 
 
 def singularity_terms(model, E0, theta, phi, dphi):
-    r"""$(\dot\theta^2, \det A)$ of `phi_second_derivative` without the forces: where the
-    ODE (5.19) is singular ($\dot\theta^2 \le 0$ or $\det A = 0$). Inputs are
+    r"""$(\dot	heta^2, \det A)$ of `phi_second_derivative` without the forces: where the
+    ODE (5.19) is singular ($\dot	heta^2 \le 0$ or $\det A = 0$). Inputs are
     `stop_gradient`-ed: a check, not part of any derivative."""
-    theta, phi, dphi = jax.lax.stop_gradient((theta, phi, dphi))
-    q, dPhi = constraint(theta, phi, dphi)
-    M = mech.mass_matrix(model, q)
-    M_dPhi = M @ dPhi
-    dtheta_sq = _theta_dot_squared(model, E0, q, dPhi @ M_dPhi)
-    A = jnp.concatenate([M_dPhi[:, None], M[:, 1:] * dtheta_sq], axis=1)
+    E0, theta, phi, dphi = jax.lax.stop_gradient((E0, theta, phi, dphi))
+    A, dtheta_sq = _linear_system(model, E0, *constraint(theta, phi, dphi))
     return dtheta_sq, mech.det_small(A)
 
 
