@@ -219,3 +219,26 @@ def test_no_guess_other_models_and_sweep():
     gm = _gait.find_gait(vj.CompassGait(psi=math.radians(4.0) - dpsi), "stable", guess=SEED)
     fd = (np.array([float(gp.a), float(gp.b)]) - np.array([float(gm.a), float(gm.b)])) / (2 * dpsi)
     np.testing.assert_allclose(np.asarray(sw.tangent[3]), fd, rtol=1e-5)
+
+
+def test_inexact_newton_ends_only_at_the_final_tolerance():
+    """`damped_newton(..., tolerances=(loose, final))`: a residual whose evaluation error is
+    the tolerance it is given converges to the root of the *final* problem; the last
+    accepted evaluation is at `final`, the first at `loose`, and the iterates agree
+    with exact Newton."""
+    target = jnp.array([2.0, 3.0])
+
+    def fn(x, tol):
+        return x**2 - target + tol, tol
+
+    x0 = jnp.array([1.0, 1.0])
+    x, r, tol, k = _gait.damped_newton(fn, x0, rtol=1e-14, atol=1e-14, tolerances=(1e-3, 1e-12))
+    assert float(tol) == 1e-12
+    np.testing.assert_allclose(np.asarray(x), np.sqrt(np.asarray(target) - 1e-12), rtol=1e-15)
+    # The loose tolerance really is used: stopped after the first evaluation, the
+    # residual carries its error.
+    _, r1, tol1, _ = _gait.damped_newton(fn, x0, max_steps=0, tolerances=(1e-3, 1e-12))
+    assert float(tol1) == 1e-3
+    x_exact, _, _, _ = _gait.damped_newton(lambda y: (y**2 - target + 1e-12, None), x0,
+                                           rtol=1e-14, atol=1e-14)
+    np.testing.assert_allclose(np.asarray(x), np.asarray(x_exact), rtol=1e-15)

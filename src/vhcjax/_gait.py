@@ -45,6 +45,9 @@ VHC_CONFIG = SolverConfig(rtol=1e-12, atol=1e-12, max_steps=512, solver="dopri8"
 #: A gait is accepted when the max-norm of its residual is below this.
 SUCCESS_TOL = 1e-9
 
+#: Loosest integration tolerance of the inexact Newton iterations (`damped_newton`).
+_LOOSE_TOL = 1e-6
+
 # Known gaits of the default model (thesis Table 1) at 3 degrees: (a, b). Seeds for
 # continuation only (they need not be exact; tests check the gaits found from them).
 _REFERENCE_PSI = math.radians(3.0)
@@ -232,21 +235,28 @@ def _phi_field(theta, y, args):
     return jnp.concatenate([dphi, ddphi, (sign / jnp.sqrt(dth2))[None]])
 
 
+def _scaled_tolerances(config, tol):
+    """`(rtol, atol)` of `config` scaled so that `rtol == tol` (`tol` may be traced)."""
+    return tol, config.atol * (tol / config.rtol)
+
+
 def _solver(name):
     return {"tsit5": diffrax.Tsit5, "dopri8": diffrax.Dopri8, "dopri5": diffrax.Dopri5}[name]()
 
 
-def vhc_boundary(model, ab, family, config=VHC_CONFIG):
+def vhc_boundary(model, ab, family, config=VHC_CONFIG, tol=None):
     """Integrate $\\phi'' = f_0$ (5.19) over $\\theta \\in [a, c]$ for given $(a, b)$; the
-    residual of Problem 1 (5.20) and the data of the candidate gait."""
+    residual of Problem 1 (5.20) and the data of the candidate gait. `tol` (may be
+    traced) overrides `config.rtol` and `config.atol`."""
     a, b = ab[0], ab[1]
     data = _impact_data(model, a)
     d, real = _solve_for_d(model, data, b, family)
-    return _boundary_abd(model, data, a, b, d, real, config)
+    return _boundary_abd(model, data, a, b, d, real, config, tol)
 
 
-def _boundary_abd(model, data, a, b, d, real, config):
+def _boundary_abd(model, data, a, b, d, real, config, tol=None):
     """`vhc_boundary` for a given $d$ (not necessarily a root of 5.13)."""
+    rtol, atol = (config.rtol, config.atol) if tol is None else _scaled_tolerances(config, tol)
     real = jnp.asarray(real)
     d = jnp.where(real, d, -1.0)  # keep the arithmetic finite on failure
     x_plus, x_minus = _states_from(data, b, d)
@@ -268,7 +278,7 @@ def _boundary_abd(model, data, a, b, d, real, config):
         dt0=(c - a) / 64,
         y0=y0,
         args=(model, E0, sign),
-        stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
+        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
         saveat=diffrax.SaveAt(t1=True),
         max_steps=config.max_steps,
         adjoint=diffrax.ForwardMode(),
@@ -297,8 +307,8 @@ def _boundary_abd(model, data, a, b, d, real, config):
     return BoundaryData(x_plus, x_minus, E0, yc[:2], yc[2], residual, code)
 
 
-def _vhc_eval(model, ab, family, config=VHC_CONFIG):
-    bd = vhc_boundary(model, ab, family, config)
+def _vhc_eval(model, ab, family, config=VHC_CONFIG, tol=None):
+    bd = vhc_boundary(model, ab, family, config, tol)
     r = jnp.where(bd.result == RESULTS.successful, bd.residual, 1e3 * jnp.ones(2))
     return r, bd
 
@@ -382,8 +392,8 @@ def vhc_search(
     res_fn = lambda ab: vhc_residual(model, ab, family, config)  # noqa: E731
     if solver == "newton":
         ab, _, bd, iters = damped_newton(
-            lambda x: _vhc_eval(model, x, family, config), ab0,
-            rtol=rtol, atol=atol, max_steps=max_steps,
+            lambda x, tol: _vhc_eval(model, x, family, config, tol), ab0,
+            rtol=rtol, atol=atol, max_steps=max_steps, tolerances=(_LOOSE_TOL, config.rtol),
         )
         return _finish_vhc(model, bd, iters, jnp.isfinite(ab).all(), family, config)
     if solver == "lm":
@@ -408,20 +418,30 @@ def _label(family):
     return family if isinstance(family, str) else ""
 
 
-def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10):
+def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10,
+                  tolerances=None):
     r"""Newton's method with a forward-mode Jacobian, globalised by Levenberg-Marquardt
-    damping.
+    damping, optionally inexact (loose integrations while far from the solution).
 
-    `fn(x) -> (r, aux)`. Every evaluation is one forward-mode pass (`jax.jacfwd`) that
-    returns $r$, $J$ and `aux` together, so the evaluation that tests a step is also the
-    next iteration's linearisation. From the last accepted point the full Newton step
-    ($\lambda = 0$) is tried first; a step that does not decrease $\|r\|_2$ is retried
-    from the same point with $(J^TJ + \lambda I)\Delta x = J^Tr$ and growing $\lambda$
-    (no new Jacobian), up to `max_trials` times. Near a solution this is plain Newton
-    (quadratic convergence); far from it the damped steps turn toward steepest descent,
-    which lets the VHC search leave the edge of the region where (5.13) has real roots
-    (plain Newton stalls there from the thesis seed (7.2) for the unstable family). Stops
-    when $\|\Delta x\|_\infty < \mathrm{atol} + \mathrm{rtol}\|x\|_\infty$,
+    `fn(x) -> (r, aux)`, or `fn(x, tol) -> (r, aux)` with `tolerances`. Every evaluation
+    is one forward-mode pass (`jax.jacfwd`) that returns $r$, $J$ and `aux` together, so
+    the evaluation that tests a step is also the next iteration's linearisation. From the
+    last accepted point the full Newton step ($\lambda = 0$) is tried first; a step that
+    does not decrease $\|r\|_2$ is retried from the same point with
+    $(J^TJ + \lambda I)\Delta x = J^Tr$ and growing $\lambda$ (no new Jacobian), up to
+    `max_trials` times. Near a solution this is plain Newton (quadratic convergence); far
+    from it the damped steps turn toward steepest descent, which lets the VHC search leave
+    the edge of the region where (5.13) has real roots (plain Newton stalls there from the
+    thesis seed (7.2) for the unstable family).
+
+    `tolerances = (loose, final)`: the integration tolerance `tol` handed to `fn` for a
+    trial from a point with residual $r$ is $10^{-2}\|r\|_\infty^2$ clipped to
+    `[final, loose]`: about a hundredth of the residual that a quadratically converging
+    step leaves, so the integration error never decides a step, while the early
+    iterations integrate with far fewer steps (inexact Newton). Only an evaluation at
+    `final` can end the iteration.
+
+    Stops when $\|\Delta x\|_\infty < \mathrm{atol} + \mathrm{rtol}\|x\|_\infty$,
     $\|r\|_\infty < \mathrm{atol}$, no trial decreases the residual, or after `max_steps`
     accepted steps.
 
@@ -430,14 +450,27 @@ def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10
     """
     n = x0.shape[0]
     eye = jnp.eye(n, dtype=x0.dtype)
+    loose, final = (None, None) if tolerances is None else tolerances
 
-    def r_and_aux(y):
-        r, aux = fn(y)
-        return r, (r, aux)
+    def evaluate_traced(x, tol):
+        def r_and_aux(y):
+            r, aux = fn(y) if tolerances is None else fn(y, tol)
+            return r, (r, aux)
 
-    def evaluate(x):
         J, (r, aux) = jax.jacfwd(r_and_aux, has_aux=True)(x)
         return r, J, aux
+
+    # Traced once, here: the loop body replays the jaxpr instead of tracing `fn` again
+    # (tracing `fn` is most of the compile time), and the carry shapes come from the
+    # same trace.
+    tol0 = jnp.asarray(1.0 if loose is None else loose, x0.dtype)
+    evaluate_jaxpr, consts = jax.closure_convert(evaluate_traced, x0, tol0)
+    evaluate = lambda x, tol: evaluate_jaxpr(x, tol, *consts)  # noqa: E731
+
+    def trial_tolerance(r, first):
+        if tolerances is None:
+            return tol0
+        return jnp.where(first, loose, jnp.clip(1e-2 * jnp.max(jnp.abs(r)) ** 2, final, loose))
 
     def cond(carry):
         k, trials, done = carry[4], carry[5], carry[6]
@@ -451,28 +484,29 @@ def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10
         A = jnp.where(trials == 0, J, JtJ + lam * eye)
         dx = jnp.linalg.solve(A, jnp.where(trials == 0, r, J.T @ r))
         dx = jnp.where(jnp.isfinite(dx).all() & ~first, dx, jnp.zeros_like(dx))
-        r_t, J_t, aux_t = evaluate(x - dx)
+        tol = trial_tolerance(r, first)
+        r_t, J_t, aux_t = evaluate(x - dx, tol)
         improved = first | (
             jnp.isfinite(r_t).all() & jnp.isfinite(J_t).all() & (jnp.sum(r_t**2) < jnp.sum(r**2))
         )
         pick = lambda u, v: jax.tree_util.tree_map(lambda p, q: jnp.where(improved, p, q), u, v)  # noqa: E731
         x_new, r_new, J_new, aux_new = pick((x - dx, r_t, J_t, aux_t), (x, r, J, aux))
         small = ~first & (jnp.max(jnp.abs(dx)) < atol + rtol * jnp.max(jnp.abs(x)))
-        done = improved & (small | (jnp.max(jnp.abs(r_t)) < atol))
+        exact = True if tolerances is None else tol <= final
+        done = improved & exact & (small | (jnp.max(jnp.abs(r_t)) < atol))
         # After a failure: grow lambda from a scale of J^T J; after a success: Newton again.
         lam_start = 1e-3 * jnp.max(jnp.diag(JtJ))
         lam = jnp.where(improved, 0.0, jnp.where(trials == 0, lam_start, 10.0 * lam))
         trials = jnp.where(improved, 0, trials + 1)
         return x_new, r_new, J_new, aux_new, k + improved, trials, done, lam
 
-    r_shape, aux_shape = jax.eval_shape(fn, x0)
+    r_shape, J_shape, aux_shape = jax.eval_shape(evaluate, x0, tol0)
     # Every carry starts as a function of x0: under `vmap` the loop's carries are then all
     # batched from the start, and the batching rule traces the (large) body once.
     tie = jnp.where(x0[0] == x0[0], 0.0, 0.0).astype(x0.dtype)
     zeros = lambda t: jax.tree_util.tree_map(lambda l: jnp.zeros(l.shape, l.dtype) + tie.astype(l.dtype), t)  # noqa: E731
-    init = (x0, zeros(r_shape), zeros(jax.ShapeDtypeStruct(r_shape.shape + (n,), x0.dtype)),
-            zeros(aux_shape), jnp.array(-1) + tie.astype(int), jnp.array(0) + tie.astype(int),
-            tie != 0, tie)
+    init = (x0, zeros(r_shape), zeros(J_shape), zeros(aux_shape),
+            jnp.array(-1) + tie.astype(int), jnp.array(0) + tie.astype(int), tie != 0, tie)
     x, r, _, aux, k, _, _, _ = jax.lax.while_loop(cond, body, init)
     return x, r, aux, k
 
@@ -532,7 +566,10 @@ def complete_guess(model, ab, family="stable"):
     return jnp.stack([ab[0], ab[1], f])
 
 
-def _shoot_eval(model, z, config=DEFAULT_CONFIG):
+def _shoot_eval(model, z, config=DEFAULT_CONFIG, tol=None):
+    if tol is not None:  # a traced tolerance (inexact Newton)
+        rtol, atol = _scaled_tolerances(config, tol)
+        config = config._replace(rtol=rtol, atol=atol)
     sr = _step(model, model.section_to_state(z), config)
     r = model.state_to_section(sr.x_plus) - z
     return jnp.where(sr.result == RESULTS.successful, r, 1e3 * jnp.ones_like(r)), sr
@@ -557,8 +594,8 @@ def shooting_search(
     z0 = guess if guess.shape[-1] == 3 else complete_guess(model, guess, family)
     if solver == "newton":
         z, r, sr, iters = damped_newton(
-            lambda zz: _shoot_eval(model, zz, config), z0,
-            rtol=rtol, atol=atol, max_steps=max_steps,
+            lambda zz, tol: _shoot_eval(model, zz, config, tol), z0,
+            rtol=rtol, atol=atol, max_steps=max_steps, tolerances=(_LOOSE_TOL, config.rtol),
         )
         res = jnp.max(jnp.abs(r))
         ok = (sr.result == RESULTS.successful) & jnp.isfinite(z).all()
