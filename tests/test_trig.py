@@ -31,10 +31,43 @@ def test_switch_selects_the_evaluation():
     x = jnp.array([0.3])
     # fresh lambdas: JAX caches traces per function, and the switch acts at trace time
     prims = str(jax.make_jaxpr(lambda v: trig.sin(v))(x))
-    assert "vhcjax_sin_cos" in prims
+    assert "vhcjax_sin_cos[polynomial=True]" in prims
+    assert " sin" not in jax.jit(lambda v: trig.sin(v)).lower(x).as_text()
     with trig.polynomial(False):
         native = str(jax.make_jaxpr(lambda v: trig.sin(v))(x))
-    assert "vhcjax_sin_cos" not in native and "sin" in native
+        assert "stablehlo.sine" in jax.jit(lambda v: trig.sin(v)).lower(x).as_text()
+    assert "vhcjax_sin_cos[polynomial=False]" in native
+
+
+@pytest.mark.parametrize("polynomial", [False, True])
+def test_each_angle_evaluated_once_per_field_evaluation(polynomial):
+    """XLA copies cheap elementwise ops into every fused kernel that reads them; `trig`
+    marks its results so that they are computed once. Counted in the optimised HLO of the
+    compass-gait `phi''` field and of its forward-mode Jacobian: two angles, so 2 `sin`
+    and 2 `cos` with libm (16 each before), and the polynomial's Cody-Waite rounding
+    (`round-nearest-even`) twice, once per angle."""
+    import re
+
+    from vhcjax import _gait
+
+    model = vj.CompassGait()
+    y, E0, th = jnp.array([-0.25, 0.5, 0.0]), jnp.array(1.0), jnp.array(0.2)
+
+    def field(m, th, y, E0):
+        return _gait._phi_field(th, y, (m, E0, 1.0))
+
+    def jac(m, th, y, E0):
+        return jax.jacfwd(lambda yy: field(m, th, yy, E0))(y)
+
+    with trig.polynomial(polynomial):
+        for fn in (field, jac):
+            hlo = jax.jit(fn).lower(model, th, y, E0).compile().as_text()
+            ops = re.findall(r"\b(sine|cosine|round-nearest-even)\(", hlo)
+            if polynomial:
+                assert ops.count("round-nearest-even") == 2, ops
+                assert "sine" not in ops
+            else:
+                assert (ops.count("sine"), ops.count("cosine")) == (2, 2), ops
 
 
 def test_simulation_uses_the_polynomials():
@@ -42,11 +75,11 @@ def test_simulation_uses_the_polynomials():
     x0 = jnp.array([0.2186688, -0.32338856, -1.09238359, -0.37737395])
     with trig.polynomial(False):  # the library turns it on by itself around the swing solve
         jaxpr = str(jax.make_jaxpr(lambda x: vj.simulate(model, x, 1).steps.period)(x0))
-    assert "vhcjax_sin_cos" in jaxpr
+    assert "vhcjax_sin_cos[polynomial=True]" in jaxpr
     # ... but not in single steps and their Jacobians (compile time of large graphs)
     with trig.polynomial(False):
         jac = str(jax.make_jaxpr(jax.jacfwd(lambda x: vj.step(model, x, throw=False).x_plus))(x0))
-    assert "vhcjax_sin_cos" not in jac and "sin" in jac
+    assert "polynomial=False" in jac and "polynomial=True" not in jac
 
 
 def _ulp_error(got, want):

@@ -1,26 +1,32 @@
-"""Sine and cosine as vectorizable float64 polynomials, for model kinematics.
+"""Sine and cosine for model kinematics: evaluated once per call, libm or polynomials.
 
-Why this module exists: XLA's CPU backend evaluates float64 `sin`/`cos` by calling the
-scalar C library once per element, and it recomputes them inside every fused kernel that
-needs them. In the autodiff-derived compass-gait vector field (mass matrix, bias forces)
-that is 44 libm calls per evaluation and ~77 % of the run time (measured with `perf`).
-Written as plain arithmetic (fdlibm's algorithm: Cody-Waite reduction by pi/2 and the
-minimax kernels `__kernel_sin`/`__kernel_cos`), the same functions vectorize and fuse,
-and the vector field runs ~2.4x faster. (GPUs have fast native ones; the polynomials cost no more there.)
+Why this module exists: XLA counts `sin` and `cos` as cheap and copies them into every
+fused kernel that reads them. In the autodiff-derived compass-gait `phi''` field each
+angle's `sin` and `cos` were evaluated 8 times (16 `sin`, 16 `cos` in the optimised HLO
+for two angles; 32 each in its Jacobian), and on CPU each is a scalar libm call: ~40 % of
+the batched gait-search run time (measured with `perf`). `sin_cos` is one JAX primitive
+whose results are marked expensive for XLA (see `_once`), so each angle's pair is
+computed once per evaluation (2 `sin`, 2 `cos`; tested); the gait searches ran 2x
+faster and the simulation 1.5x.
 
-Accuracy: within 1 ulp of the correctly rounded value for |x| <= 1e6 (checked against
-numpy on random points in the tests); for larger |x| the absolute error stays below
-ulp(x), the uncertainty of the argument itself (tested to 1e10). `inf` and `nan` give `nan`,
-as `jnp.sin` does.
+Two evaluations, chosen when a function is traced:
 
-Derivatives are exact (sin' = cos, cos' = -sin) to any order; `sin_cos` is one JAX
-primitive, so derivatives of any order add one equation each, not a re-traced polynomial.
+- libm (XLA's own `sin`/`cos`), the default;
+- polynomials (`with trig.polynomial():`): fdlibm's algorithm (Cody-Waite reduction by
+  pi/2 and the minimax kernels `__kernel_sin`/`__kernel_cos`) written as plain
+  arithmetic, which vectorizes. The library turns them on around its multi-step
+  simulations; in the large graphs of the searches and Jacobians they cost ~1 s more
+  compile time and run no faster. (GPUs have fast native ones; the polynomials cost no
+  more there.)
 
-The polynomials are used where the library turns them on (`with trig.polynomial():`,
-around its multi-step simulations); elsewhere `trig.sin` is
-`jnp.sin`, since each polynomial call is ~50 XLA instructions and large graphs (Jacobians
-of Jacobians) would compile ~3x slower. Use them in a model's `points`/energies where
-`jnp.sin`/`jnp.cos` would go:
+Accuracy of the polynomials: within 1 ulp of the correctly rounded value for
+|x| <= 1e6 (checked against numpy on random points in the tests); for larger |x| the
+absolute error stays below ulp(x), the uncertainty of the argument itself (tested to
+1e10). `inf` and `nan` give `nan`, as `jnp.sin` does.
+
+Derivatives are exact (sin' = cos, cos' = -sin) to any order; derivatives of any order
+add one equation each, not a re-traced function. Use them in a model's
+`points`/energies where `jnp.sin`/`jnp.cos` would go:
 
     from vhcjax import trig
     hip = l * jnp.stack([-trig.sin(q[0]), trig.cos(q[0])])
@@ -60,7 +66,7 @@ _C1, _C2, _C3, _C4, _C5, _C6 = (
 
 def _reduce(x):
     """$x = n\\pi/2 + (y + y_{lo})$ with $|y| \\le \\pi/4$ (two Cody-Waite rounds)."""
-    n = jnp.round(x * _INV_PIO2)
+    (n,) = _once((jnp.round(x * _INV_PIO2),), x)  # shared by the sin and cos kernels
     t = x - n * _PIO2_1
     w = n * _PIO2_2
     r = t - w
@@ -93,28 +99,58 @@ def _sin_cos_impl(x):
     return sin, cos
 
 
+def _once(values, x):
+    """`values` (functions of `x`), each evaluated once per call in compiled code.
+
+    XLA counts `sin`, `cos` and the polynomial arithmetic as cheap and copies them into
+    every fused kernel that reads them: in the compass-gait `phi''` field each angle's
+    `sin` was evaluated 8 times (16 `sin` and 16 `cos` for two angles in the optimised
+    HLO). A floating-point division counts as expensive and is never copied, so dividing
+    by a 1 that XLA cannot fold (`1 + 0 x`: `0 x` is not 0 for infinite or NaN `x`) makes
+    each value a kernel output, computed once and read by the others (2 `sin`, 2 `cos`).
+    Exact: `v / 1 == v`.
+    """
+    one = 1.0 + 0.0 * x
+    return tuple(v / one for v in values)
+
+
+def _sin_cos_poly(x):
+    return _once(_sin_cos_impl(x), x)
+
+
+def _sin_cos_libm(x):
+    return _once((jnp.sin(x), jnp.cos(x)), x)
+
+
+def _lower(polynomial):
+    return mlir.lower_fun(_sin_cos_poly if polynomial else _sin_cos_libm, multiple_results=True)
+
+
 # One primitive for the pair: a single equation in a jaxpr however deep the derivatives
 # go (a `custom_jvp` re-traced the polynomials at every derivative order: 5x the tracing
-# time of the compass-gait simulation), lowered to the arithmetic above.
+# time of the compass-gait simulation), lowered to the polynomials or to libm.
 sin_cos_p = Primitive("vhcjax_sin_cos")
 sin_cos_p.multiple_results = True
-sin_cos_p.def_impl(jax.jit(_sin_cos_impl))  # eager == jitted, bit for bit
-sin_cos_p.def_abstract_eval(lambda x: (jax.core.ShapedArray(x.shape, x.dtype),) * 2)
-mlir.register_lowering(sin_cos_p, mlir.lower_fun(_sin_cos_impl, multiple_results=True))
+_IMPLS = {True: jax.jit(_sin_cos_poly), False: jax.jit(_sin_cos_libm)}
+sin_cos_p.def_impl(lambda x, *, polynomial: _IMPLS[polynomial](x))  # eager == jitted
+sin_cos_p.def_abstract_eval(lambda x, **_: (jax.core.ShapedArray(x.shape, x.dtype),) * 2)
+mlir.register_lowering(
+    sin_cos_p, lambda ctx, x, *, polynomial: _lower(polynomial)(ctx, x)
+)
 
 
-def _sin_cos_jvp(primals, tangents):
+def _sin_cos_jvp(primals, tangents, *, polynomial):
     (x,), (dx,) = primals, tangents
-    s, c = sin_cos_p.bind(x)
+    s, c = sin_cos_p.bind(x, polynomial=polynomial)
     if type(dx) is ad.Zero:
         zero = ad.Zero.from_primal_value(s)
         return (s, c), (zero, zero)
     return (s, c), (c * dx, -s * dx)
 
 
-def _sin_cos_batch(args, dims):
+def _sin_cos_batch(args, dims, *, polynomial):
     (x,), (d,) = args, dims
-    return sin_cos_p.bind(x), (d, d)
+    return sin_cos_p.bind(x, polynomial=polynomial), (d, d)
 
 
 ad.primitive_jvps[sin_cos_p] = _sin_cos_jvp
@@ -127,13 +163,14 @@ _POLYNOMIAL = contextvars.ContextVar("vhcjax_trig_polynomial", default=False)
 @contextlib.contextmanager
 def polynomial(enabled=True):
     """Within this block, functions *traced* evaluate `sin`/`cos` by the polynomials;
-    outside it they lower to XLA's own `sin`/`cos` (one instruction each).
+    outside it they lower to XLA's own `sin`/`cos`.
 
     The library turns it on where vector fields are evaluated millions of times: the
     multi-step simulations (`simulate`, `simulate_batch`, `recover`, hence basins,
     bifurcation diagrams, pushes and floor steps). Elsewhere (single steps, Jacobians of
-    the step map, the VHC residual, the transverse linearization) graphs are large and
-    run rarely, and ~50 instructions per call would triple XLA's compile time for nothing.
+    the step map, the gait searches, the transverse linearization) graphs are large, and
+    ~50 instructions per call cost compile time (~1 s more for a gait search, which ran
+    no faster).
     Both paths agree to 1 ulp. The choice is made when JAX traces a function; a trace
     that JAX has cached keeps the choice it was made with.
     """
@@ -147,9 +184,7 @@ def polynomial(enabled=True):
 def sin_cos(x):
     """`(sin x, cos x)` elementwise, in float64 (see `polynomial` for which evaluation)."""
     x = jnp.asarray(x, dtype=float)
-    if _POLYNOMIAL.get():
-        return tuple(sin_cos_p.bind(x))
-    return jnp.sin(x), jnp.cos(x)
+    return tuple(sin_cos_p.bind(x, polynomial=_POLYNOMIAL.get()))
 
 
 def sin(x):
