@@ -822,9 +822,11 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
 # Batches
 # ---------------------------------------------------------------------------------------
 # Members per device of one dispatch. Measured on the 2-core CPU (VHC search, one device):
-# 226 / 250 / 271 / 333 / 210 gaits/s at 16 / 32 / 64 / 128 / 256 members, so batches
-# run as chunks of 128 per device (also below `_sharding.MAX_DISPATCH`: 1,024 hung).
-_BUCKETS = (1, 8, 64, 128)
+# 751 / 970 / 1,047 / 1,031 / 1,039 gaits/s at 32 / 64 / 128 / 256 / 512 members, so
+# batches run as chunks of 128 per device (also below `_sharding.MAX_DISPATCH`: 1,024
+# hung). Smaller batches pad to the next power of two from 8 (at most 2x the work; each
+# bucket is one compilation).
+_BUCKETS = (1, 8, 16, 32, 64, 128)
 _MAX_CHUNK = 128
 assert _MAX_CHUNK <= MAX_DISPATCH
 
@@ -881,7 +883,7 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     - `psi`: optional `(B,)` slopes (rad), replacing `model.psi`.
     - `mesh`: a `jax.sharding.Mesh` with a `"batch"` axis; default: all local devices.
 
-    Batches are padded to a few bucket sizes per device (1, 8, 64, 128) with copies of
+    Batches are padded to a few bucket sizes per device (1, 8, 16, 32, 64, 128) with copies of
     the first member, so that new sizes rarely recompile; larger batches run in chunks of
     128 per device (the fastest size measured). Each padded batch is split over the
     devices of `mesh` (several GPUs, or CPU devices with
