@@ -616,15 +616,14 @@ def shooting_search(
     else:
         raise ValueError(f"solver must be 'newton' or 'optimistix' for shooting, got {solver!r}")
     E0 = model.energy(x_plus)
-    # Which root of the energy quadratic is this gait's d?
+    # Which root of the energy quadratic A d^2 + B d + C (5.13) is this gait's d? The
+    # family's root (-B + sign sqrt(disc)) / 2A lies on the side of the vertex -B/2A
+    # where sign (2 A d + B) > 0; d is nearer the other root iff that is negative.
     n = model.n_dof
     a, b = x_plus[0], x_plus[n]
-    sign = family_sign(family)
-    data = _impact_data(model, a)
-    d_fam, _ = _solve_for_d(model, data, b, sign)
-    d_oth, _ = _solve_for_d(model, data, b, -sign)
+    A, B, C = _quadratic(model, _impact_data(model, a), b)
     d = x_minus[n]
-    wrong = jnp.abs(d - d_oth) < jnp.abs(d - d_fam)
+    wrong = (B**2 - 4 * A * C >= 0) & (family_sign(family) * (2 * A * d + B) < 0)
     code = RESULTS.where((code == RESULTS.successful) & wrong, RESULTS.other_cycle, code)
     return _make_gait(
         model, x_plus, x_minus, T, E0, iters, res, code, _label(family), "shooting"

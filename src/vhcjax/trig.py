@@ -122,8 +122,10 @@ def _sin_cos_libm(x):
     return _once((jnp.sin(x), jnp.cos(x)), x)
 
 
-def _lower(polynomial):
-    return mlir.lower_fun(_sin_cos_poly if polynomial else _sin_cos_libm, multiple_results=True)
+_LOWERINGS = {
+    True: mlir.lower_fun(_sin_cos_poly, multiple_results=True),
+    False: mlir.lower_fun(_sin_cos_libm, multiple_results=True),
+}
 
 
 # One primitive for the pair: a single equation in a jaxpr however deep the derivatives
@@ -135,7 +137,7 @@ _IMPLS = {True: jax.jit(_sin_cos_poly), False: jax.jit(_sin_cos_libm)}
 sin_cos_p.def_impl(lambda x, *, polynomial: _IMPLS[polynomial](x))  # eager == jitted
 sin_cos_p.def_abstract_eval(lambda x, **_: (jax.core.ShapedArray(x.shape, x.dtype),) * 2)
 mlir.register_lowering(
-    sin_cos_p, lambda ctx, x, *, polynomial: _lower(polynomial)(ctx, x)
+    sin_cos_p, lambda ctx, x, *, polynomial: _LOWERINGS[polynomial](ctx, x)
 )
 
 
