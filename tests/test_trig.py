@@ -9,6 +9,7 @@ the compass-gait vector field built on them against the same field built on `jnp
 """
 
 import math
+import re
 
 import jax
 import jax.numpy as jnp
@@ -16,7 +17,7 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax import trig
+from vhcjax import _gait, trig
 
 RNG = np.random.default_rng(7)
 

@@ -235,28 +235,29 @@ def _phi_field(theta, y, args):
     return jnp.concatenate([dphi, ddphi, (sign / jnp.sqrt(dth2))[None]])
 
 
-def _scaled_tolerances(config, tol):
-    """`(rtol, atol)` of `config` scaled so that `rtol == tol` (`tol` may be traced)."""
-    return tol, config.atol * (tol / config.rtol)
+def _with_tolerance(config, tol):
+    """`config` with `rtol = tol` and `atol` scaled alike (`tol` may be traced: the
+    inexact Newton iterations of `damped_newton`); `tol=None` leaves it unchanged."""
+    if tol is None:
+        return config
+    return config._replace(rtol=tol, atol=config.atol * (tol / config.rtol))
 
 
 def _solver(name):
     return {"tsit5": diffrax.Tsit5, "dopri8": diffrax.Dopri8, "dopri5": diffrax.Dopri5}[name]()
 
 
-def vhc_boundary(model, ab, family, config=VHC_CONFIG, tol=None):
+def vhc_boundary(model, ab, family, config=VHC_CONFIG):
     """Integrate $\\phi'' = f_0$ (5.19) over $\\theta \\in [a, c]$ for given $(a, b)$; the
-    residual of Problem 1 (5.20) and the data of the candidate gait. `tol` (may be
-    traced) overrides `config.rtol` and `config.atol`."""
+    residual of Problem 1 (5.20) and the data of the candidate gait."""
     a, b = ab[0], ab[1]
     data = _impact_data(model, a)
     d, real = _solve_for_d(model, data, b, family)
-    return _boundary_abd(model, data, a, b, d, real, config, tol)
+    return _boundary_abd(model, data, a, b, d, real, config)
 
 
-def _boundary_abd(model, data, a, b, d, real, config, tol=None):
+def _boundary_abd(model, data, a, b, d, real, config):
     """`vhc_boundary` for a given $d$ (not necessarily a root of 5.13)."""
-    rtol, atol = (config.rtol, config.atol) if tol is None else _scaled_tolerances(config, tol)
     real = jnp.asarray(real)
     d = jnp.where(real, d, -1.0)  # keep the arithmetic finite on failure
     x_plus, x_minus = _states_from(data, b, d)
@@ -278,7 +279,7 @@ def _boundary_abd(model, data, a, b, d, real, config, tol=None):
         dt0=(c - a) / 64,
         y0=y0,
         args=(model, E0, sign),
-        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
         saveat=diffrax.SaveAt(t1=True),
         max_steps=config.max_steps,
         adjoint=diffrax.ForwardMode(),
@@ -308,7 +309,7 @@ def _boundary_abd(model, data, a, b, d, real, config, tol=None):
 
 
 def _vhc_eval(model, ab, family, config=VHC_CONFIG, tol=None):
-    bd = vhc_boundary(model, ab, family, config, tol)
+    bd = vhc_boundary(model, ab, family, _with_tolerance(config, tol))
     r = jnp.where(bd.result == RESULTS.successful, bd.residual, 1e3 * jnp.ones(2))
     return r, bd
 
@@ -567,10 +568,7 @@ def complete_guess(model, ab, family="stable"):
 
 
 def _shoot_eval(model, z, config=DEFAULT_CONFIG, tol=None):
-    if tol is not None:  # a traced tolerance (inexact Newton)
-        rtol, atol = _scaled_tolerances(config, tol)
-        config = config._replace(rtol=rtol, atol=atol)
-    sr = _step(model, model.section_to_state(z), config)
+    sr = _step(model, model.section_to_state(z), _with_tolerance(config, tol))
     r = model.state_to_section(sr.x_plus) - z
     return jnp.where(sr.result == RESULTS.successful, r, 1e3 * jnp.ones_like(r)), sr
 
