@@ -47,6 +47,8 @@ SUCCESS_TOL = 1e-9
 
 #: Loosest integration tolerance of the inexact Newton iterations (`damped_newton`).
 _LOOSE_TOL = 1e-6
+#: Trial tolerance of the inexact Newton iterations: this times the squared residual.
+_TOL_FACTOR = 1e-4
 
 # Known gaits of the default model (thesis Table 1) at 3 degrees: (a, b). Seeds for
 # continuation only (they need not be exact; tests check the gaits found from them).
@@ -436,15 +438,17 @@ def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10
     thesis seed (7.2) for the unstable family).
 
     `tolerances = (loose, final)`: the integration tolerance `tol` handed to `fn` for a
-    trial from a point with residual $r$ is $10^{-2}\|r\|_\infty^2$ clipped to
-    `[final, loose]`: about a hundredth of the residual that a quadratically converging
-    step leaves, so the integration error never decides a step, while the early
-    iterations integrate with far fewer steps (inexact Newton). Only an evaluation at
-    `final` can end the iteration.
+    trial from a point with residual $r$ is $10^{-4}\|r\|_\infty^2$ clipped to
+    `[final, loose]`: $10^{-4}$ of the residual that a quadratically converging step
+    leaves, so the step computed from the trial is nearly an exact Newton step, while
+    the early iterations integrate with far fewer steps (inexact Newton). Only an
+    evaluation at `final` can end the iteration.
 
-    Stops when $\|\Delta x\|_\infty < \mathrm{atol} + \mathrm{rtol}\|x\|_\infty$,
-    $\|r\|_\infty < \mathrm{atol}$, no trial decreases the residual, or after `max_steps`
-    accepted steps.
+    Stops at an accepted point $x$ (evaluated at `final`) when the step that led there
+    or the Newton step from it, $J^{-1}r$, is below $\mathrm{atol} +
+    \mathrm{rtol}\|x\|_\infty$ (the second is an estimate of the error of $x$, so a
+    converged point needs no further evaluation), when $\|r\|_\infty < \mathrm{atol}$,
+    when no trial decreases the residual, or after `max_steps` accepted steps.
 
     **Returns:** `(x, r, aux, iterations)` at the last accepted point; `iterations`
     counts accepted steps.
@@ -471,7 +475,7 @@ def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10
     def trial_tolerance(r, first):
         if tolerances is None:
             return tol0
-        return jnp.where(first, loose, jnp.clip(1e-2 * jnp.max(jnp.abs(r)) ** 2, final, loose))
+        return jnp.where(first, loose, jnp.clip(_TOL_FACTOR * jnp.max(jnp.abs(r)) ** 2, final, loose))
 
     def cond(carry):
         k, trials, done = carry[4], carry[5], carry[6]
@@ -493,8 +497,11 @@ def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10
         pick = lambda u, v: jax.tree_util.tree_map(lambda p, q: jnp.where(improved, p, q), u, v)  # noqa: E731
         x_new, r_new, J_new, aux_new = pick((x - dx, r_t, J_t, aux_t), (x, r, J, aux))
         small = ~first & (jnp.max(jnp.abs(dx)) < atol + rtol * jnp.max(jnp.abs(x)))
+        # The Newton step from the trial point estimates its error (to first order).
+        dx_next = jnp.linalg.solve(J_t, r_t)
+        close = jnp.max(jnp.abs(dx_next)) < atol + rtol * jnp.max(jnp.abs(x - dx))
         exact = True if tolerances is None else tol <= final
-        done = improved & exact & (small | (jnp.max(jnp.abs(r_t)) < atol))
+        done = improved & exact & (small | close | (jnp.max(jnp.abs(r_t)) < atol))
         # After a failure: grow lambda from a scale of J^T J; after a success: Newton again.
         lam_start = 1e-3 * jnp.max(jnp.diag(JtJ))
         lam = jnp.where(improved, 0.0, jnp.where(trials == 0, lam_start, 10.0 * lam))
