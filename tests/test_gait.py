@@ -138,6 +138,47 @@ def test_batch_equals_unbatched_and_flags_hopeless(gaits):
     assert np.all(np.isfinite(np.asarray(b.x_plus)))  # never a silent NaN
 
 
+@pytest.mark.parametrize("method", ["vhc", "shooting"])
+def test_chord_finish_gives_the_newton_gaits_and_codes(gaits, method):
+    """`chord=True` (the default for batches of 64 or more per device) keeps the Jacobian
+    once the residual is small and evaluates the residual alone: same gaits (to the
+    solver tolerance) and the same codes as full Newton, hopeless guesses included."""
+    m = vj.CompassGait()
+    seed = SEED if method == "vhc" else tuple(np.asarray(_gait.complete_guess(m, SEED, "stable")))
+    hopeless = [(2.5, 8.0), (0.2, 0.0)] if method == "vhc" else [(2.5, 8.0, 1.0), (0.2, 0.0, 0.0)]
+    guesses = jnp.array([seed, seed] + hopeless)
+    psi = jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0]))
+    full = _gait.find_gaits(m, guesses, "stable", method, psi=psi, chord=False)
+    chord = _gait.find_gaits(m, guesses, "stable", method, psi=psi, chord=True)
+    assert vj.result_names(chord.result) == vj.result_names(full.result)
+    assert vj.result_names(chord.result)[:2] == ["successful", "successful"]
+    ok = np.asarray(full.result == vj.RESULTS.successful)
+    np.testing.assert_allclose(np.asarray(chord.x_plus)[ok], np.asarray(full.x_plus)[ok],
+                               atol=1e-10)
+    one = gaits[3.0, "stable", method]  # unbatched, full Newton
+    np.testing.assert_allclose(np.asarray(chord.x_plus[0]), np.asarray(one.x_plus), atol=1e-10)
+    assert float(jnp.max(chord.residual[:2])) < 1e-10
+    assert np.all(np.isfinite(np.asarray(chord.x_plus)))
+
+
+def test_chord_steps_keep_the_jacobian():
+    """`damped_newton(chord_below=...)`: from the first point with a residual below the
+    threshold the Jacobian is frozen. With an infinite threshold every step uses the
+    guess's Jacobian (linear convergence: more steps than Newton) and still reaches the
+    root; with a small one the steps are Newton's until the end."""
+    target = jnp.array([2.0, 3.0])
+    fn = lambda x: (x**2 - target, None)  # noqa: E731
+    x0 = jnp.array([1.4, 1.7])  # chord contraction |1 - x*/x0| < 0.02
+    root = np.sqrt(np.asarray(target))
+    x_n, _, _, k_n = _gait.damped_newton(fn, x0, rtol=1e-14, atol=1e-14)
+    x_c, _, _, k_c = _gait.damped_newton(fn, x0, rtol=1e-14, atol=1e-14, chord_below=jnp.inf)
+    x_l, _, _, k_l = _gait.damped_newton(fn, x0, rtol=1e-14, atol=1e-14, chord_below=1e-3)
+    for x in (x_n, x_c, x_l):
+        np.testing.assert_allclose(np.asarray(x), root, rtol=1e-13)
+    assert int(k_c) > int(k_n) + 3
+    assert int(k_n) <= int(k_l) <= int(k_n) + 1
+
+
 def test_large_batches_run_in_chunks_with_the_same_results(monkeypatch):
     """Batches above `_MAX_CHUNK` run as host-side chunks (a 1,024 batch hung in the XLA
     CPU runtime): with the chunk size set to 2, four members run as 2 + 2, each padded to
