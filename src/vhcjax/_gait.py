@@ -537,11 +537,8 @@ def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10
             jnp.array(-1) + tie.astype(int), jnp.array(0) + tie.astype(int), tie != 0, tie,
             tie != 0)
     carry = jax.lax.while_loop(cond, make_body(evaluate), init)
-    if chord_below is not None:
-        def residual_traced(x, tol):
-            return call(x, tol)
-
-        residual_jaxpr, rconsts = jax.closure_convert(residual_traced, x0, tol0)
+    if chord_below is not None:  # the chord loop: the same steps, the residual alone
+        residual_jaxpr, rconsts = jax.closure_convert(call, x0, tol0)
 
         def residual(x, tol, J):
             r, aux = residual_jaxpr(x, tol, *rconsts)
