@@ -472,18 +472,20 @@ def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10
     loose, final = (None, None) if tolerances is None else tolerances
     call = (lambda y, tol: fn(y)) if tolerances is None else fn
 
+    # `fn` is traced once, here, into a jaxpr; the forward-mode evaluation differentiates
+    # the jaxpr (cheaper than tracing `fn` again under `jacfwd`), the loop bodies replay
+    # jaxprs, and the carry shapes come from the same trace.
+    tol0 = jnp.asarray(1.0 if loose is None else loose, x0.dtype)
+    residual_jaxpr, rconsts = jax.closure_convert(call, x0, tol0)
+
     def evaluate_traced(x, tol):
         def r_and_aux(y):
-            r, aux = call(y, tol)
+            r, aux = residual_jaxpr(y, tol, *rconsts)
             return r, (r, aux)
 
         J, (r, aux) = jax.jacfwd(r_and_aux, has_aux=True)(x)
         return r, J, aux
 
-    # Traced once, here: the loop body replays the jaxpr instead of tracing `fn` again
-    # (tracing `fn` is most of the compile time), and the carry shapes come from the
-    # same trace.
-    tol0 = jnp.asarray(1.0 if loose is None else loose, x0.dtype)
     evaluate_jaxpr, consts = jax.closure_convert(evaluate_traced, x0, tol0)
     evaluate = lambda x, tol, J: evaluate_jaxpr(x, tol, *consts)  # noqa: E731
 
@@ -538,8 +540,6 @@ def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10
             tie != 0)
     carry = jax.lax.while_loop(cond, make_body(evaluate), init)
     if chord_below is not None:  # the chord loop: the same steps, the residual alone
-        residual_jaxpr, rconsts = jax.closure_convert(call, x0, tol0)
-
         def residual(x, tol, J):
             r, aux = residual_jaxpr(x, tol, *rconsts)
             return r, J, aux
