@@ -924,8 +924,8 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     - `family`, `method`, `solver`: as in `find_gait`.
     - `psi`: optional `(B,)` slopes (rad), replacing `model.psi`.
     - `mesh`: a `jax.sharding.Mesh` with a `"batch"` axis; default: all local devices.
-    - `chord`: finish Newton with chord steps (see `vhc_search`). `None` (default):
-      where a device holds 64 or more members, the throughput regime; smaller batches
+    - `chord`: with `guesses`, finish Newton with chord steps (see `vhc_search`).
+      `None` (default): where a device holds 64 or more members, the throughput regime; smaller batches
       (latency, where compile time dominates) compile one evaluation fewer. It pays off
       after about 6,000 (VHC) / 16,000 (shooting) gaits per session on a 2-core CPU: a
       one-off batch smaller than that finishes sooner with `chord=False`.
@@ -950,6 +950,8 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
         raise ValueError("find_gaits needs a batch: guesses, psi or batched model parameters")
     B = max(sizes)
     chunk = _MAX_CHUNK * device_multiple(mesh)
+    if chord is None:  # members per device of one dispatch (every chunk: one program)
+        chord = _padded_size(min(B, chunk), mesh) // device_multiple(mesh) >= _CHORD_MIN_MEMBERS
     if B > chunk:
         def part(x, i, j):
             if eqx.is_array(x) and jnp.ndim(x) > 0:
@@ -960,9 +962,7 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
             lambda i, j: find_gaits(
                 jax.tree_util.tree_map(lambda x: part(x, i, j), model),
                 None if guesses is None else part(guesses, i, j),
-                family, method, solver=solver, mesh=mesh,
-                # one program for every chunk, the last one too
-                chord=(_MAX_CHUNK >= _CHORD_MIN_MEMBERS) if chord is None else chord,
+                family, method, solver=solver, mesh=mesh, chord=chord,
             ),
             B, chunk,
         )
@@ -981,8 +981,6 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     if guesses is None:
         gaits = _from_reference_batch(model, sign, method, _HOMOTOPY_STEPS, axes)
     else:
-        if chord is None:
-            chord = P // device_multiple(mesh) >= _CHORD_MIN_MEMBERS
         gaits = _search_batch(model, pad(guesses), sign, method, solver, axes, bool(chord))
     gaits = jax.tree_util.tree_map(lambda x: x[:B], gaits)
     return _relabel(gaits, family)
