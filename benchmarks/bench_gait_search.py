@@ -5,7 +5,7 @@ thesis seed (7.2), stable family; VHC search (Problem 1) and shooting (Problem 2
 baseline (`scipy_gait.py`: thesis closed forms, `solve_ivp` DOP853, `fsolve`, same ODE
 tolerances) solves the same problems one by one on at most `--scipy-max` members (its cost
 is linear in B); throughput is gaits per second of run time, compile time reported
-separately (first call minus a warm call).
+separately (first call minus a warm call, JAX's caches cleared before each entry).
 
     python benchmarks/bench_gait_search.py [--cpu-devices 2] [--quick] [--json OUT]
 """
@@ -66,6 +66,9 @@ def main(argv=None):
                 jax.block_until_ready(g)
                 return g
 
+            # Each entry's compile time from cold caches, as in a fresh process (without
+            # this, an entry would reuse traces of the functions the ones before it share).
+            jax.clear_caches()
             t0 = time.perf_counter()
             g = run()
             first = time.perf_counter() - t0

@@ -283,3 +283,46 @@ def test_inexact_newton_ends_only_at_the_final_tolerance():
     x_exact, _, _, _ = _gait.damped_newton(lambda y: (y**2 - target + 1e-12, None), x0,
                                            rtol=1e-14, atol=1e-14)
     np.testing.assert_allclose(np.asarray(x), np.asarray(x_exact), rtol=1e-15)
+
+
+def test_batched_newton_equals_newton_on_each_member():
+    """`damped_newton_batch` iterates every member in one loop; members stop at different
+    iterations (or never converge) and keep their state: each row equals `damped_newton`
+    on that member alone, with and without inexact tolerances and chord steps."""
+    targets = jnp.array([[2.0, 3.0], [5.0, 0.5], [-1.0, 2.0], [2.0, 3.0]])  # row 2: no root
+    X0 = jnp.array([[1.4, 1.7], [1.0, 1.0], [1.0, 1.0], [30.0, -20.0]])
+
+    def fn(x, tol, t):
+        return x**2 - t + tol, tol
+
+    for kw in ({}, {"tolerances": (1e-3, 1e-12)}, {"tolerances": (1e-3, 1e-12), "chord_below": 1e-2}):
+        tol_fn = (lambda X, T: fn(X, T[:, None], targets)) if kw else (lambda X, T: fn(X, 0.0 * X, targets))
+        X, R, aux, k = _gait.damped_newton_batch(tol_fn, X0, rtol=1e-13, atol=1e-13, **kw)
+        for i in range(4):
+            one = ((lambda x, tol, i=i: fn(x, tol, targets[i])) if kw
+                   else (lambda x, i=i: fn(x, 0.0 * x, targets[i])))
+            x, r, _, ki = _gait.damped_newton(one, X0[i], rtol=1e-13, atol=1e-13, **kw)
+            np.testing.assert_allclose(np.asarray(X[i]), np.asarray(x), rtol=1e-15, atol=1e-15)
+            np.testing.assert_allclose(np.asarray(R[i]), np.asarray(r), rtol=1e-15, atol=1e-15)
+            assert int(k[i]) == int(ki)
+        assert len(set(np.asarray(k).tolist())) > 1  # the members did stop at different steps
+        np.testing.assert_allclose(np.asarray(X)[[0, 1, 3]] ** 2, np.asarray(targets)[[0, 1, 3]], rtol=1e-11)
+        assert np.all(np.isfinite(np.asarray(X)))
+
+
+@pytest.mark.parametrize("fam", ["stable", "unstable"])
+def test_batch_jacobian_matches_finite_differences(gaits, fam):
+    """The Jacobian of a batched Newton iteration (`batch_jacobian`: forward mode along
+    each unknown of every member at once) against central differences, per member: the
+    gait point, a point off it, and another slope."""
+    g = gaits[3.0, fam, "vhc"]
+    sign = _gait.family_sign(fam)
+    psi = jnp.radians(jnp.array([3.0, 3.0, 2.5]))
+    ab = jnp.stack([jnp.stack([g.a, g.b])] * 3) + jnp.array([[0.0, 0.0], [0.004, -0.01], [0.0, 0.0]])
+    fn = lambda X: jax.vmap(lambda p, x: _gait._vhc_eval(vj.CompassGait(psi=p), x, sign))(psi, X)  # noqa: E731
+    R, J, _ = eqx.filter_jit(lambda X: _gait.batch_jacobian(fn, X))(ab)
+    for i in range(3):
+        m = vj.CompassGait(psi=psi[i])
+        fd = _central(lambda x: _vhc_r(m, x, sign), ab[i], 1e-6)
+        np.testing.assert_allclose(np.asarray(J[i]), fd, rtol=1e-5, atol=1e-6)
+        np.testing.assert_allclose(np.asarray(R[i]), np.asarray(_vhc_r(m, ab[i], sign)), atol=1e-13)
