@@ -987,6 +987,14 @@ def _search_batch(model, guesses, sign, method, solver, axes, chord):
     return _search(model, guesses, sign, method, solver, chord, axes)
 
 
+@filter_jit
+def _search_one(model, guesses, sign, method, solver, chord):
+    """`_search` on a batch of one member, unbatched inside."""
+    one = jax.tree_util.tree_map(lambda x: x[0] if (eqx.is_array(x) and jnp.ndim(x) > 0) else x, model)
+    gait = _search(one, guesses[0], sign, method, solver, chord)
+    return jax.tree_util.tree_map(lambda x: x[None], gait)
+
+
 def _from_reference(model, sign, method, num=_HOMOTOPY_STEPS):
     s_buf = jnp.linspace(0.0, 1.0, num)
     gaits, _ = _continue(reference_model(), model, s_buf, num, _seed(sign, method), sign, method)
@@ -1053,11 +1061,9 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
             B, chunk,
         )
     P = _padded_size(B, mesh)
-    if P == 1 and guesses is not None:  # one member: `find_gait`'s program, unbatched
-        one = jax.tree_util.tree_map(lambda x: x[0] if (eqx.is_array(x) and jnp.ndim(x) > 0) else x, model)
-        args = (one, guesses[0], family_sign(family), method, solver)
-        gait = _search_jit(*args, *((True,) if chord else ()))  # as `find_gait` calls it
-        return _relabel(jax.tree_util.tree_map(lambda x: jnp.asarray(x)[None], gait), family)
+    if P == 1 and guesses is not None:  # one member: no batching to trace or run
+        gait = _search_one(model, guesses, family_sign(family), method, solver, bool(chord))
+        return _relabel(gait, family)
 
     def pad(x):
         x = jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])
