@@ -51,6 +51,8 @@ _LOOSE_TOL = 1e-6
 _TOL_FACTOR = 1e-4
 #: Residual below which Newton keeps its Jacobian and evaluates the residual alone.
 _CHORD_BELOW = 1e-3
+#: The Newton-step convergence test of the searches also needs a residual below this.
+_RESIDUAL_CAP = SUCCESS_TOL / 10
 
 # Known gaits of the default model (thesis Table 1) at 3 degrees: (a, b). Seeds for
 # continuation only (they need not be exact; tests check the gaits found from them).
@@ -412,7 +414,7 @@ def vhc_search(
             lambda m, x, tol: _vhc_eval(m, x, family, config, tol),
             lambda m, ab, r, bd, k: _finish_vhc(m, bd, k, jnp.isfinite(ab).all(), family, config),
             model, ab0, axes, chord, rtol=rtol, atol=atol, max_steps=max_steps,
-            tolerances=(_LOOSE_TOL, config.rtol),
+            tolerances=(_LOOSE_TOL, config.rtol), residual_cap=_RESIDUAL_CAP,
         )
     if solver == "lm":
         ab, iters = _levenberg_marquardt(res_fn, ab0, rtol, atol, 4 * max_steps)
@@ -450,7 +452,7 @@ def _label(family):
 
 
 def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10,
-                  tolerances=None, chord_below=None):
+                  tolerances=None, chord_below=None, residual_cap=jnp.inf):
     r"""Newton's method with a forward-mode Jacobian, globalised by Levenberg-Marquardt
     damping, optionally inexact (loose integrations while far from the solution) and
     finishing with chord steps.
@@ -483,8 +485,9 @@ def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10
     Stops at an accepted point $x$ (evaluated at `final`) when the step that led there
     or the Newton step from it, $J^{-1}r$, is below $\mathrm{atol} +
     \mathrm{rtol}\|x\|_\infty$ (the second is an estimate of the error of $x$, so a
-    converged point needs no further evaluation), when $\|r\|_\infty < \mathrm{atol}$,
-    when no trial decreases the residual, or after `max_steps` accepted steps.
+    converged point needs no further evaluation; it also needs $\|r\|_\infty <$
+    `residual_cap`), when $\|r\|_\infty < \mathrm{atol}$, when no trial decreases
+    the residual, or after `max_steps` accepted steps.
 
     **Returns:** `(x, r, aux, iterations)` at the last accepted point; `iterations`
     counts accepted steps.
@@ -496,7 +499,7 @@ def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10
 
     out = damped_newton_batch(one, x0[None], rtol=rtol, atol=atol, max_steps=max_steps,
                               max_trials=max_trials, tolerances=tolerances,
-                              chord_below=chord_below)
+                              chord_below=chord_below, residual_cap=residual_cap)
     return jax.tree_util.tree_map(lambda a: a[0], out)
 
 
@@ -513,7 +516,7 @@ def batch_jacobian(fn, X):
 
 
 def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10,
-                        tolerances=None, chord_below=None):
+                        tolerances=None, chord_below=None, residual_cap=jnp.inf):
     r"""`damped_newton` on every member of a batch at once, written out along the leading
     axis (`X0`: `(B, n)`; `fn(X, tol) -> (R, aux)` with `tol`: `(B,)`, each row of `R`
     depending on its own row of `X` only).
@@ -590,7 +593,7 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
             size = atol + rtol * norm(X - dX)
             small = ~first & (norm(dX) < atol + rtol * norm(X))
             # The Newton step from the trial point estimates its error (to first order).
-            close = norm(solve(J_t, R_t)) < size
+            close = (norm(solve(J_t, R_t)) < size) & (norm(R_t) < residual_cap)
             exact = True if tolerances is None else tol <= final
             done_new = improved & exact & (small | close | (norm(R_t) < atol))
             chord_new = chord
@@ -729,6 +732,7 @@ def shooting_search(
         return _newton_search(
             lambda m, z, tol: _shoot_eval(m, z, config, tol), finish, model, z0, axes, chord,
             rtol=rtol, atol=atol, max_steps=max_steps, tolerances=(_LOOSE_TOL, config.rtol),
+            residual_cap=_RESIDUAL_CAP,
         )
     if solver != "optimistix":
         raise ValueError(f"solver must be 'newton' or 'optimistix' for shooting, got {solver!r}")
