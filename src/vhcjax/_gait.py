@@ -385,9 +385,9 @@ def vhc_search(
     - `model`: a two-DOF `WalkerModel` (e.g. `CompassGait`).
     - `guess`: $(a_0, b_0)$.
     - `family`: `"stable"` (thesis selector 2) or `"unstable"` (selector 1).
-    - `solver`: `"newton"` (default: `damped_newton`, forward-mode Jacobian with a
-      backtracking line search, rescued by Levenberg-Marquardt (optimistix) where it
-      stalls), `"lm"` (Levenberg-Marquardt only), `"optimistix"` (plain `optx.Newton`, which stalls from
+    - `solver`: `"newton"` (default: `damped_newton`, forward-mode Jacobian, steps
+      damped Levenberg-Marquardt style where a full step fails), `"lm"` (optimistix's
+      Levenberg-Marquardt only), `"optimistix"` (plain `optx.Newton`, which stalls from
       the thesis seed (7.2) for the unstable family) or `"optax"` (L-BFGS on the squared
       residual; slower, offered for comparison).
     - `rtol`, `atol`, `max_steps`: of the solver.
