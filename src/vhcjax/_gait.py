@@ -402,11 +402,8 @@ def vhc_search(
     **Returns:** a `Gait` (with a leading batch axis with `axes`).
     """
     if axes is not None and solver != "newton":
-        return eqx.filter_vmap(
-            lambda m, g: vhc_search(m, g, family, solver=solver, rtol=rtol, atol=atol,
-                                    max_steps=max_steps, config=config),
-            in_axes=(axes, 0),
-        )(model, guess)
+        return _each_member(vhc_search, model, guess, axes, family, solver=solver, rtol=rtol,
+                            atol=atol, max_steps=max_steps, config=config)
     ab0 = jnp.asarray(guess, dtype=float)[..., :2]
     res_fn = lambda ab: vhc_residual(model, ab, family, config)  # noqa: E731
     if solver == "newton":
@@ -445,6 +442,11 @@ def _newton_search(evaluate, finish, model, x0, axes, chord, **newton):
     fn = lambda X, T: eqx.filter_vmap(evaluate, in_axes=(axes, 0, 0))(model, X, T)  # noqa: E731
     X, R, aux, k = damped_newton_batch(fn, x0, **newton)
     return eqx.filter_vmap(finish, in_axes=(axes, 0, 0, 0, 0))(model, X, R, aux, k)
+
+
+def _each_member(search, model, guess, axes, family, **kwargs):
+    """`search` on every member of a batch by `vmap` (the solvers without a batch loop)."""
+    return eqx.filter_vmap(lambda m, g: search(m, g, family, **kwargs), in_axes=(axes, 0))(model, guess)
 
 
 def _label(family):
@@ -706,11 +708,8 @@ def shooting_search(
     """
     guess = jnp.asarray(guess, dtype=float)
     if axes is not None and solver != "newton":
-        return eqx.filter_vmap(
-            lambda m, g: shooting_search(m, g, family, solver=solver, rtol=rtol, atol=atol,
-                                         max_steps=max_steps, config=config),
-            in_axes=(axes, 0),
-        )(model, guess)
+        return _each_member(shooting_search, model, guess, axes, family, solver=solver,
+                            rtol=rtol, atol=atol, max_steps=max_steps, config=config)
     if guess.shape[-1] == 3:
         z0 = guess
     elif axes is None:
@@ -1012,7 +1011,8 @@ def _from_reference_batch(model, sign, method, num, axes):
 
 def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, solver="newton",
                mesh=None, chord=None):
-    """Batched `find_gait`: `vmap` over guesses, slopes and model parameters, never raises.
+    """Batched `find_gait` over guesses, slopes and model parameters (one Newton loop over
+    the batch; other solvers by `vmap`), never raises.
 
     **Arguments:**
 
