@@ -521,13 +521,14 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
                         tolerances=None, chord_below=None, residual_cap=jnp.inf):
     r"""`damped_newton` on every member of a batch at once, written out along the leading
     axis (`X0`: `(B, n)`; `fn(X, tol) -> (R, aux)` with `tol`: `(B,)`, each row of `R`
-    depending on its own row of `X` only).
+    depending on its own row of `X` only, every leaf of `aux` with the batch axis first).
 
     The loop runs while any member is still iterating; members that have stopped keep
     their state. This is what `jax.vmap` makes of `damped_newton`, but the residual is
     differentiated *after* it is batched: tracing does not have to batch the (three
-    times larger) forward-mode evaluation, which saves about a second of compile time
-    per batched search. `tolerances` as in `damped_newton` (`None`: `tol` is ignored).
+    times larger) forward-mode evaluation (measured: 0.6-0.8 s less tracing for 128
+    members with the chord finish). `tolerances` as in `damped_newton` (`None`: `tol` is
+    ignored).
 
     **Returns:** `(X, R, aux, iterations)`, each with the leading batch axis.
     """
