@@ -393,8 +393,8 @@ def vhc_search(
     - `rtol`, `atol`, `max_steps`: of the solver.
     - `config`: `SolverConfig` of the $\\phi''$ integration.
     - `chord`: `"newton"` only: finish with chord steps (`damped_newton`'s
-      `chord_below`): in large batches 1.7x the throughput, for one more compiled
-      evaluation (about 3 s more to compile).
+      `chord_below`): in large batches 1.6x the throughput, for one more compiled
+      evaluation (1.5-2.2 s more to compile).
     - `axes`: searches a batch. `guess` is then `(B, 2)` and `axes` gives the batch axis
       of each of `model`'s leaves (`0` or `None`, as `jax.vmap`'s `in_axes`). With
       `"newton"` one loop iterates every member (`damped_newton_batch`).
@@ -702,7 +702,7 @@ def shooting_search(
     (forward-mode Jacobian through the heel-strike event); `"optimistix"` uses
     `vhcjax._poincare.fixed_point` (plain `optx.Newton`). The `family` label is checked:
     a fixed point whose $d$ is the other root of (5.13) gets `RESULTS.other_cycle`.
-    `chord`: as in `vhc_search` (1.8x the batched throughput). `axes`: a batch of guesses,
+    `chord`: as in `vhc_search` (1.6-1.8x the batched throughput). `axes`: a batch of guesses,
     as in `vhc_search`.
 
     **Returns:** a `Gait` (`method="shooting"`).
@@ -1026,7 +1026,7 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     - `chord`: with `guesses`, finish Newton with chord steps (see `vhc_search`).
       `None` (default): where a device holds 64 or more members, the throughput regime; smaller batches
       (latency, where compile time dominates) compile one evaluation fewer. It pays off
-      after about 6,000 (VHC) / 16,000 (shooting) gaits per session on a 2-core CPU: a
+      after about 7,000 (VHC) / 9,000 (shooting) gaits per session on a 2-core CPU: a
       one-off batch smaller than that finishes sooner with `chord=False`.
 
     Batches are padded to a few bucket sizes per device (1, 8, 16, 32, 64, 128) with copies of
