@@ -179,20 +179,33 @@ def test_chord_steps_keep_the_jacobian():
     assert int(k_n) <= int(k_l) <= int(k_n) + 1
 
 
-def test_large_batches_run_in_chunks_with_the_same_results(monkeypatch):
+@pytest.mark.parametrize("workers", ["1", "2"])
+def test_large_batches_run_in_chunks_with_the_same_results(monkeypatch, workers):
     """Batches above `_MAX_CHUNK` run as host-side chunks (a 1,024 batch hung in the XLA
-    CPU runtime): with the chunk size set to 2, four members run as 2 + 2, each padded to
-    the bucket of 8 (one compiled program), and give the unchunked results and codes."""
+    CPU runtime): with the chunk size set to 2, five members run as 2 + 2 + 1, each padded
+    to 2 and then to the bucket of 8 (one compiled program), one chunk at a time or two at
+    once from host threads, and give the unchunked results and codes."""
     m = vj.CompassGait()
-    guesses = jnp.array([[0.20, -1.0], [0.20, -1.0], [2.5, 8.0], [0.2, 0.0]])
-    psi = jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0]))
+    guesses = jnp.array([[0.20, -1.0], [0.20, -1.0], [2.5, 8.0], [0.2, 0.0], [0.20, -1.0]])
+    psi = jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0, 2.5]))
     whole = _gait.find_gaits(m, guesses, "stable", psi=psi)
     monkeypatch.setattr(_gait, "_MAX_CHUNK", 2)
+    monkeypatch.setenv("VHCJAX_HOST_WORKERS", workers)
     chunked = _gait.find_gaits(m, guesses, "stable", psi=psi)
     assert vj.result_names(chunked.result) == vj.result_names(whole.result)
-    assert chunked.x_plus.shape == whole.x_plus.shape == (4, 4)
+    assert chunked.x_plus.shape == whole.x_plus.shape == (5, 4)
     np.testing.assert_allclose(np.asarray(chunked.x_plus), np.asarray(whole.x_plus), rtol=1e-12, atol=1e-14)
     np.testing.assert_allclose(np.asarray(chunked.T), np.asarray(whole.T), rtol=1e-12)
+
+
+def test_chunk_size_gives_every_host_worker_a_chunk():
+    """Large batches run in chunks of `_MAX_CHUNK`; with two host workers (CPU cores) a
+    batch above 8 members per worker is split into one bucket-sized chunk per worker."""
+    assert _gait._chunk_size(1000, 1, None) == _gait._chunk_size(1000, 2, None) == 128
+    assert _gait._chunk_size(100, 1, None) == 128 and _gait._chunk_size(100, 2, None) == 64
+    assert _gait._chunk_size(16, 2, None) == 128  # not split: 8 per worker
+    assert _gait._chunk_size(17, 2, None) == 16
+    assert _gait._chunk_size(40, 4, None) == 16
 
 
 def test_batch_over_model_parameters():

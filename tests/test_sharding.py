@@ -94,3 +94,44 @@ def test_batch_sharded_over_four_cpu_devices_matches_one_device():
     assert "LIBRARY OK" in out.stdout and "(3, 2)" in out.stdout
     assert "SIMULATE OK (6, 3)" in out.stdout
     assert "GAITS OK" in out.stdout
+
+
+def test_in_chunks_runs_chunks_concurrently_and_keeps_their_order():
+    """With several workers the chunks run from host threads at once (each chunk here waits
+    until two have started) and the results come back in batch order."""
+    import threading
+
+    import jax.numpy as jnp
+    import numpy as np
+
+    from vhcjax._sharding import in_chunks
+
+    started = threading.Barrier(2, timeout=30)
+    threads = set()
+
+    def fn(i, j):
+        threads.add(threading.get_ident())
+        if i < 4:  # the first two chunks: deadlocks unless they run concurrently
+            started.wait()
+        return {"x": jnp.arange(i, j, dtype=float), "y": jnp.full((j - i, 2), float(i))}
+
+    out = in_chunks(fn, 7, 2, workers=2)
+    np.testing.assert_array_equal(np.asarray(out["x"]), np.arange(7.0))
+    np.testing.assert_array_equal(np.asarray(out["y"][:, 0]), [0, 0, 2, 2, 4, 4, 6])
+    assert len(threads) == 2
+    serial = in_chunks(lambda i, j: {"x": jnp.arange(i, j, dtype=float),
+                                     "y": jnp.full((j - i, 2), float(i))}, 7, 2)
+    np.testing.assert_array_equal(np.asarray(serial["y"]), np.asarray(out["y"]))
+
+
+def test_host_workers_one_per_cpu_core_or_as_set(monkeypatch):
+    import jax
+
+    from vhcjax._sharding import default_mesh, host_workers
+
+    monkeypatch.delenv("VHCJAX_HOST_WORKERS", raising=False)
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    if jax.devices()[0].platform == "cpu":
+        assert host_workers(default_mesh(jax.devices()[:1])) == max(1, cores)
+    monkeypatch.setenv("VHCJAX_HOST_WORKERS", "3")
+    assert host_workers() == 3

@@ -33,7 +33,7 @@ from ._compile import filter_jit
 from . import _poincare
 from ._hybrid import DEFAULT_CONFIG, SolverConfig, _step
 from ._results import RESULTS
-from ._sharding import MAX_DISPATCH, device_multiple, in_chunks, shard_batch
+from ._sharding import MAX_DISPATCH, device_multiple, host_workers, in_chunks, shard_batch
 from ._vhc import phi_second_derivative, singularity_terms
 
 FAMILIES = ("stable", "unstable")
@@ -962,6 +962,9 @@ _BUCKETS = (1, 8, 16, 32, 64, 128)
 _MAX_CHUNK = 128
 # Guessed batches of at least this many members per device finish with chord steps.
 _CHORD_MIN_MEMBERS = 64
+# Batches of at most this many members per host worker are not split over workers (the
+# run is short next to its compilation; splitting would compile a second bucket).
+_MIN_SPLIT = 8
 assert _MAX_CHUNK <= MAX_DISPATCH
 
 
@@ -978,6 +981,17 @@ def _padded_size(B, mesh):
         return 1
     k = device_multiple(mesh)
     return _bucket(-(-B // k)) * k
+
+
+def _chunk_size(B, workers, mesh):
+    """Members per dispatch: at most `_MAX_CHUNK` per device, and with several host
+    workers (CPU cores, `_sharding.host_workers`) a batch of more than `_MIN_SPLIT` per
+    worker is split into one bucket-sized chunk per worker, so that all cores work."""
+    k = device_multiple(mesh)
+    chunk = _MAX_CHUNK * k
+    if workers > 1 and B > _MIN_SPLIT * workers:
+        chunk = min(chunk, _bucket(-(-B // (workers * k))) * k)
+    return chunk
 
 
 def _batched_axes(model):
@@ -1031,10 +1045,12 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
 
     Batches are padded to a few bucket sizes per device (1, 8, 16, 32, 64, 128) with copies of
     the first member, so that new sizes rarely recompile; larger batches run in chunks of
-    128 per device (the fastest size measured). Each padded batch is split over the
-    devices of `mesh` (several GPUs, or CPU devices with
-    `XLA_FLAGS=--xla_force_host_platform_device_count=N`); results are identical to a
-    single-device run.
+    128 per device (the fastest size measured), all padded to the same program. On a CPU
+    the chunks run concurrently, one per core (`_sharding.host_workers`; XLA runs each
+    program on one core), and a batch of more than 8 members per core is split into one
+    chunk per core. Each padded batch is split over the devices of `mesh` (several GPUs,
+    or CPU devices with `XLA_FLAGS=--xla_force_host_platform_device_count=N`). Results are
+    identical however the batch is chunked or split.
 
     **Returns:** a `Gait` with a leading batch axis; check `result` per member.
     """
@@ -1048,27 +1064,36 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     if not sizes:
         raise ValueError("find_gaits needs a batch: guesses, psi or batched model parameters")
     B = max(sizes)
-    chunk = _MAX_CHUNK * device_multiple(mesh)
+    workers = host_workers(mesh)
+    chunk = _chunk_size(B, workers, mesh)
     if chord is None:  # members per device of one dispatch (every chunk: one program)
         chord = _padded_size(min(B, chunk), mesh) // device_multiple(mesh) >= _CHORD_MIN_MEMBERS
-    if B > chunk:
-        def part(x, i, j):
-            if eqx.is_array(x) and jnp.ndim(x) > 0:
-                return jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])[i:j]
-            return x
+    sign = family_sign(family)
+    if B <= chunk:
+        gaits = _find_chunk(model, guesses, B, _padded_size(B, mesh), sign, method, solver, mesh, chord)
+        return _relabel(gaits, family)
 
-        return in_chunks(
-            lambda i, j: find_gaits(
-                jax.tree_util.tree_map(lambda x: part(x, i, j), model),
-                None if guesses is None else part(guesses, i, j),
-                family, method, solver=solver, mesh=mesh, chord=chord,
-            ),
-            B, chunk,
-        )
-    P = _padded_size(B, mesh)
+    def part(x, i, j):
+        if eqx.is_array(x) and jnp.ndim(x) > 0:
+            return jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])[i:j]
+        return x
+
+    gaits = in_chunks(
+        lambda i, j: _find_chunk(
+            jax.tree_util.tree_map(lambda x: part(x, i, j), model),
+            None if guesses is None else part(guesses, i, j),
+            j - i, chunk, sign, method, solver, mesh, chord,
+        ),
+        B, chunk, workers,
+    )
+    return _relabel(gaits, family)
+
+
+def _find_chunk(model, guesses, B, P, sign, method, solver, mesh, chord):
+    """`find_gaits` on one dispatch of `B` members: pad to `P` (a bucket times the device
+    count), search, unpad."""
     if P == 1 and guesses is not None:  # one member: no batching to trace or run
-        gait = _search_one(model, guesses, family_sign(family), method, solver, bool(chord))
-        return _relabel(gait, family)
+        return _search_one(model, guesses, sign, method, solver, bool(chord))
 
     def pad(x):
         x = jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])
@@ -1079,13 +1104,11 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
         lambda x: pad(x) if (eqx.is_array(x) and jnp.ndim(x) > 0) else x, model
     )
     axes = _batched_axes(model)
-    sign = family_sign(family)
     if guesses is None:
         gaits = _from_reference_batch(model, sign, method, _HOMOTOPY_STEPS, axes)
     else:
         gaits = _search_batch(model, pad(guesses), sign, method, solver, axes, bool(chord))
-    gaits = jax.tree_util.tree_map(lambda x: x[:B], gaits)
-    return _relabel(gaits, family)
+    return jax.tree_util.tree_map(lambda x: x[:B], gaits)
 
 
 # ---------------------------------------------------------------------------------------

@@ -11,6 +11,9 @@ Several hosts: call `jax.distributed.initialize()` first on each host; `default_
 spans `jax.devices()` (all devices of all hosts) and the same code runs unchanged.
 """
 
+import os
+from concurrent.futures import ThreadPoolExecutor
+
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -104,8 +107,37 @@ def round_to_devices(n, mesh=None):
 MAX_DISPATCH = 256
 
 
-def in_chunks(fn, n, chunk):
+def host_workers(mesh=None):
+    """How many chunks of a large batch to run at once (`in_chunks`).
+
+    XLA's CPU runtime runs one program on one core (the loops of an ODE solve are
+    sequential), so on a CPU the chunks run from a pool of threads: one per core not
+    already given a device of `mesh`. One on other platforms (a GPU queues its programs).
+    The environment variable `VHCJAX_HOST_WORKERS` overrides it (1: one chunk at a time).
+    """
+    env = os.environ.get("VHCJAX_HOST_WORKERS")
+    if env:
+        return max(1, int(env))
+    devices = (default_mesh() if mesh is None else mesh).devices.ravel()
+    if any(d.platform != "cpu" for d in devices):
+        return 1
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(1, (cores or 1) // devices.size)
+
+
+def in_chunks(fn, n, chunk, workers=1):
     """`fn(i, j)` on the slices `[i, j)` of a batch of `n`, `chunk` at a time, results
-    concatenated along the batch axis (a host loop: each call is one dispatch)."""
-    parts = [fn(i, min(i + chunk, n)) for i in range(0, n, chunk)]
+    concatenated along the batch axis (a host loop: each call is one dispatch).
+
+    With `workers > 1`, up to `workers` chunks run at once from a pool of threads, for
+    a CPU where each program runs on one core (see `host_workers`). The chunks are
+    independent, so the results are the same as one at a time; JAX traces and compiles a
+    program once even when several threads call it first.
+    """
+    bounds = [(i, min(i + chunk, n)) for i in range(0, n, chunk)]
+    if workers > 1 and len(bounds) > 1:
+        with ThreadPoolExecutor(min(workers, len(bounds))) as pool:
+            parts = list(pool.map(lambda b: jax.block_until_ready(fn(*b)), bounds))
+    else:
+        parts = [fn(i, j) for i, j in bounds]
     return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)

@@ -30,7 +30,7 @@ from ._hybrid import DEFAULT_CONFIG, FAST_CONFIG, _solver, _step, simulate
 from . import _poincare
 from ._poincare import fixed_point, jacobian, step_map
 from ._results import RESULTS
-from ._sharding import MAX_DISPATCH, in_chunks, round_to_devices, shard_batch
+from ._sharding import MAX_DISPATCH, host_workers, in_chunks, round_to_devices, shard_batch
 from ._transverse import TransverseLinearization, transverse_linearization
 
 #: Stable and unstable period-1 gaits of the default compass gait at 3 degrees
@@ -105,19 +105,22 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, mesh=None):
     `GaitMultipliers`. The batch is padded (copies of the first member) to 8, 64 or a
     multiple of 256, so that every batch size up to the bucket shares one compilation:
     tracing the transverse linearization through diffrax costs far more than running it;
-    batches above 256 run as a host loop over chunks of 256.
+    batches above 256 run as chunks of 256, one per CPU core at a time
+    (`_sharding.host_workers`).
     Batches above one member are split over the devices of `mesh` (default: all local
     devices).
     """
     psis = jnp.atleast_1d(jnp.asarray(psis, float))
     zs = jnp.asarray(zs, float).reshape(psis.shape[0], -1)
     n = psis.shape[0]
-    if n > _MAX_CHUNK:  # see `_sharding.MAX_DISPATCH`
-        return in_chunks(lambda i, j: family_multipliers(model, psis[i:j], zs[i:j], config,
-                                                         mesh=mesh), n, _MAX_CHUNK)
     pad = (_bucket(n) if n == 1 else round_to_devices(_bucket(n), mesh)) - n
     psis = jnp.concatenate([psis, jnp.broadcast_to(psis[:1], (pad,))])
     zs = jnp.concatenate([zs, jnp.broadcast_to(zs[:1], (pad, zs.shape[1]))])
+    if n > _MAX_CHUNK:  # see `_sharding.MAX_DISPATCH`; every chunk is one full bucket
+        out = in_chunks(lambda i, j: family_multipliers(model, psis[i:j], zs[i:j], config,
+                                                        mesh=mesh), n + pad, _MAX_CHUNK,
+                        host_workers(mesh))
+        return jax.tree_util.tree_map(lambda x: x[:n], out)
     psis, zs = shard_batch((psis, zs), mesh)
     out = _family_multipliers_padded(model, psis, zs, config)
     return jax.tree_util.tree_map(lambda x: x[:n], out)
