@@ -2,6 +2,9 @@
 
 import csv
 import json
+import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -70,3 +73,44 @@ def test_sweep_csv_png(tmp_path, capsys):
     np.testing.assert_allclose(float(r3["a"]), 0.204676, atol=6e-7)  # thesis (7.9)
     assert png_path.stat().st_size > 10_000
     assert "found at 3 of 3" in capsys.readouterr().out
+
+
+
+SCRIPT_CACHE = """
+import logging, sys
+import vhcjax as vj
+logging.basicConfig(stream=sys.stderr)
+logging.getLogger("jax._src.compiler").setLevel(logging.DEBUG)
+vj.enable_compilation_cache(sys.argv[1])
+g = vj.find_gait(vj.CompassGait(), "stable", "vhc", guess=(0.2, -1.0))
+print(repr(float(g.a)), repr(float(g.b)), repr(float(g.T)))
+"""
+
+
+def test_compiled_search_kept_on_disk_and_read_back(tmp_path):
+    """`enable_compilation_cache`: the VHC search's program is stored, a second process
+    reads it back (JAX reports a cache hit) and finds the same gait."""
+    cache = tmp_path / "xla"
+    env = dict(os.environ)
+    cmd = [sys.executable, "-c", SCRIPT_CACHE, str(cache)]
+    first = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+    assert first.returncode == 0, first.stderr[-2000:]
+    stored = sorted(p.name for p in cache.iterdir())
+    assert any(name.startswith("jit__search-") for name in stored), stored
+    second = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
+    assert second.returncode == 0, second.stderr[-2000:]
+    assert "Persistent compilation cache hit for 'jit__search'" in second.stderr
+    assert second.stdout == first.stdout
+
+
+def test_command_enables_the_cache_only_when_asked(monkeypatch, tmp_path):
+    from vhcjax import _compile
+
+    calls = []
+    monkeypatch.setattr(_compile, "enable_compilation_cache", calls.append)
+    monkeypatch.delenv("VHCJAX_CACHE_DIR", raising=False)
+    assert main(["gait", "--slope-deg", "40"]) == 2  # bad input: stops before any work
+    assert calls == []
+    monkeypatch.setenv("VHCJAX_CACHE_DIR", str(tmp_path))
+    assert main(["gait", "--slope-deg", "40"]) == 2
+    assert calls == [str(tmp_path)]

@@ -241,6 +241,15 @@ def _phi_field(theta, y, args):
     return jnp.concatenate([dphi, ddphi, (sign / jnp.sqrt(dth2))[None]])
 
 
+def _phi_field_unit(s, y, args):
+    """`_phi_field` over $s \\in [0, 1]$, $\\theta = a + s (c - a)$: the integration
+    interval is static, so diffrax inserts no runtime check of its direction (a host
+    callback, which would keep the compiled program out of JAX's persistent cache).
+    The steps and error estimates are those of the integration over $\theta$."""
+    a, span, field_args = args
+    return span * _phi_field(a + s * span, y, field_args)
+
+
 def _with_tolerance(config, tol):
     """`config` with `rtol = tol` and `atol` scaled alike (`tol` may be traced: the
     inexact Newton iterations of `damped_newton`); `tol=None` leaves it unchanged."""
@@ -278,13 +287,13 @@ def _boundary_abd(model, data, a, b, d, real, config):
     sign = jnp.sign(b)
     dth2_a, det_a = singularity_terms(model, E0, a, y0[0:1], y0[1:2])
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(_phi_field),
+        diffrax.ODETerm(_phi_field_unit),
         _solver(config.solver),
-        t0=a,
-        t1=c,
-        dt0=(c - a) / 64,
+        t0=0.0,
+        t1=1.0,
+        dt0=1.0 / 64,
         y0=y0,
-        args=(model, E0, sign),
+        args=(a, c - a, (model, E0, sign)),
         stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
         saveat=diffrax.SaveAt(t1=True),
         max_steps=config.max_steps,

@@ -10,6 +10,7 @@ import argparse
 import importlib
 import json
 import math
+import os
 import sys
 
 # Subcommand modules, in the order they appear in `vhcjax --help`.
@@ -136,6 +137,10 @@ class _ArgParser(argparse.ArgumentParser):
 def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
+    if os.environ.get("VHCJAX_CACHE_DIR"):  # keep compiled programs on disk (README)
+        from ._compile import enable_compilation_cache
+
+        enable_compilation_cache(os.environ["VHCJAX_CACHE_DIR"])
     try:
         return int(args.func(args) or 0)
     except CLIError as e:
