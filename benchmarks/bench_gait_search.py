@@ -7,7 +7,11 @@ tolerances) solves the same problems one by one on at most `--scipy-max` members
 is linear in B); throughput is gaits per second of run time, compile time reported
 separately (first call minus a warm call, JAX's caches cleared before each entry).
 
-    python benchmarks/bench_gait_search.py [--cpu-devices 2] [--quick] [--json OUT]
+    python benchmarks/bench_gait_search.py [--cpu-devices 2] [--scipy-procs 2] [--quick] [--json OUT]
+
+On a CPU vhcjax runs the chunks of a large batch on all cores at once; the plain scipy
+baseline runs on one. `--scipy-procs N` also times scipy with its members split over N
+processes, for a comparison on the same cores.
 """
 
 import argparse
@@ -34,6 +38,9 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="B = 1, 10 only; 3 scipy members")
     ap.add_argument("--cpu-devices", type=int, default=1,
                     help="split each batch over this many CPU devices (XLA host devices)")
+    ap.add_argument("--scipy-procs", type=int, default=1,
+                    help="also time scipy on this many processes at once (its members "
+                         "split over a process pool), for a same-cores comparison")
     ap.add_argument("--json", metavar="OUT")
     args = ap.parse_args(argv)
     if args.cpu_devices > 1:  # must be set before JAX starts its CPU backend
@@ -49,6 +56,12 @@ def main(argv=None):
     from vhcjax import _gait
 
     sizes = [int(s) for s in args.sizes.split(",")]
+    pool = None
+    if args.scipy_procs > 1:  # started (and scipy imported) before any timing
+        import multiprocessing
+
+        pool = multiprocessing.get_context("spawn").Pool(args.scipy_procs)
+        pool.starmap(_scipy_one, [("vhc", math.radians(3.0), (0.20, -1.0))] * args.scipy_procs)
     rows = []
     model = vj.CompassGait()
     for method in args.methods.split(","):
@@ -95,6 +108,11 @@ def main(argv=None):
                 if good and ok[i]:
                     agree.append(float(np.max(np.abs(x - mine))))
             t_sp = (time.perf_counter() - t0) / n_sp
+            t_sp_pool = None
+            if pool is not None:  # the same members, split over the pool's processes
+                t0 = time.perf_counter()
+                pool.starmap(_scipy_one, [(method, float(psi[i]), seeds[i]) for i in range(n_sp)])
+                t_sp_pool = (time.perf_counter() - t0) / n_sp
             row = dict(
                 method=method, B=B, jax_s=t_run, jax_gaits_per_s=B / t_run,
                 compile_s=max(first - t_run, 0.0), jax_success=float(ok.mean()),
@@ -102,12 +120,21 @@ def main(argv=None):
                 scipy_success=float(np.mean(sp_ok)), ratio=(B / t_run) * t_sp,
                 max_diff_vs_scipy=max(agree) if agree else None,
             )
+            if t_sp_pool is not None:
+                row.update(scipy_procs=args.scipy_procs, scipy_pool_gaits_per_s=1.0 / t_sp_pool,
+                           ratio_vs_pool=(B / t_run) * t_sp_pool)
             rows.append(row)
             print(f"{method:8s} B={B:5d}  vhcjax {row['jax_gaits_per_s']:9.1f} gaits/s "
                   f"(compile {row['compile_s']:6.1f} s, success {row['jax_success']:.3f})  "
                   f"scipy {row['scipy_gaits_per_s']:7.2f} gaits/s (success "
                   f"{row['scipy_success']:.2f})  ratio {row['ratio']:8.1f}  "
                   f"max |diff| {row['max_diff_vs_scipy']}", flush=True)
+            if t_sp_pool is not None:
+                print(f"{'':8s}          scipy on {args.scipy_procs} processes "
+                      f"{row['scipy_pool_gaits_per_s']:7.2f} gaits/s  ratio "
+                      f"{row['ratio_vs_pool']:8.1f}", flush=True)
+    if pool is not None:
+        pool.close()
     from vhcjax import _compile
 
     info = dict(device=str(jax.devices()[0]), num_devices=len(jax.devices()), cpus=os.cpu_count(),
@@ -119,6 +146,13 @@ def main(argv=None):
         with open(args.json, "w") as fh:
             json.dump(dict(info=info, rows=rows), fh, indent=1)
     return rows
+
+
+def _scipy_one(method, psi, seed):
+    """One scipy search (a process-pool task)."""
+    par = ref.Params(psi=psi)
+    search = scipy_gait.vhc_search if method == "vhc" else scipy_gait.shooting_search
+    return search(par, np.asarray(seed))
 
 
 if __name__ == "__main__":
