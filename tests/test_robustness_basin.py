@@ -44,6 +44,24 @@ def test_slice_classification_spot_checked(slice8):
             assert int(sim.num_successful) + 1 == b.steps[iy, ix]
 
 
+def test_chunks_on_host_threads_give_the_same_classification(slice8, monkeypatch):
+    """Two chunks of the slice's 64-member program run at once from host threads (one per
+    CPU core) and classify every point as the one-chunk slice did, in order."""
+    from vhcjax._basin import classify_section_points
+
+    model = stable_gait()[0]
+    gx, gy = np.meshgrid(slice8.offsets_x, slice8.offsets_y)
+    pts = np.repeat(np.asarray(slice8.z_star)[None], gx.size, 0)
+    pts[:, 0] += gx.ravel()
+    pts[:, 1] += gy.ravel()
+    monkeypatch.setenv("VHCJAX_HOST_WORKERS", "2")
+    out = classify_section_points(model, slice8.z_star, np.concatenate([pts, pts[::-1]]),
+                                  num_steps=50, chunk=64)
+    for key, ref in (("label", slice8.label), ("steps", slice8.steps), ("result", slice8.result)):
+        np.testing.assert_array_equal(out[key][:64].reshape(8, 8), ref)
+        np.testing.assert_array_equal(out[key][64:], out[key][:64][::-1])
+
+
 def test_max_converging_perturbation_brackets():
     model, z, x_star, _ = stable_gait()
     d = axis_directions(3)[:2]  # +q1, -q1

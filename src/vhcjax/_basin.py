@@ -11,6 +11,7 @@ compilation, bounded memory, and a chunk stops as soon as all its members are de
 """
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 
 import equinox as eqx
 import jax
@@ -21,7 +22,7 @@ from ._compile import filter_jit
 from ._bisection import bisect_threshold
 from ._hybrid import FAST_CONFIG
 from ._recovery import CONVERGED, recover
-from ._sharding import round_to_devices, shard_batch
+from ._sharding import host_workers, round_to_devices, shard_batch
 
 SECTION_NAMES = ("q1", "dq1", "dq2")
 BASIN_CONFIG = FAST_CONFIG
@@ -36,7 +37,8 @@ def _recover_chunk(model, z, z_star, num_steps, tol, config):
 
 def classify_section_points(model, z_star, z, *, num_steps=50, tol=1e-4, chunk=1024,
                             config=BASIN_CONFIG, progress=None, mesh=None):
-    """Classify section points `z` (shape `(N, 2n-1)`) by their fate (host loop over chunks).
+    """Classify section points `z` (shape `(N, 2n-1)`) by their fate (host loop over
+    chunks; on a CPU one chunk per core at a time, see `_sharding.host_workers`).
 
     Each chunk is split over the devices of `mesh` (default: all local devices; see
     `vhcjax._sharding`), so the same call uses every GPU of a machine (or of several hosts
@@ -49,9 +51,8 @@ def classify_section_points(model, z_star, z, *, num_steps=50, tol=1e-4, chunk=1
     z = np.asarray(z, dtype=float)
     n = z.shape[0]
     chunk = round_to_devices(chunk, mesh)
-    out = {k: [] for k in ("label", "steps", "period", "result", "z_final")}
-    starts = range(0, n, chunk)
-    for s in progress(starts) if progress is not None else starts:
+
+    def run(s):
         part = z[s : s + chunk]
         pad = chunk - part.shape[0]
         if pad:
@@ -59,12 +60,21 @@ def classify_section_points(model, z_star, z, *, num_steps=50, tol=1e-4, chunk=1
         rec = _recover_chunk(model, shard_batch(jnp.asarray(part), mesh), jnp.asarray(z_star),
                              num_steps, tol, config)
         keep = chunk - pad
-        out["label"].append(np.asarray(rec.label)[:keep])
-        out["steps"].append(np.asarray(rec.steps)[:keep])
-        out["period"].append(np.asarray(rec.period)[:keep])
-        out["result"].append(np.asarray(rec.result._value)[:keep])
         zf = jax.vmap(model.state_to_section)(rec.x_final)
-        out["z_final"].append(np.asarray(zf)[:keep])
+        return {"label": np.asarray(rec.label)[:keep], "steps": np.asarray(rec.steps)[:keep],
+                "period": np.asarray(rec.period)[:keep],
+                "result": np.asarray(rec.result._value)[:keep],
+                "z_final": np.asarray(zf)[:keep]}
+
+    starts = list(range(0, n, chunk))
+    workers = max(1, min(host_workers(mesh), len(starts)))
+    out = {k: [] for k in ("label", "steps", "period", "result", "z_final")}
+    # On a CPU, one chunk per core at a time (XLA runs a program on one core); in order.
+    with ThreadPoolExecutor(workers) as pool:
+        parts = pool.map(run, starts) if workers > 1 else map(run, starts)
+        for _, part in zip(progress(starts) if progress is not None else starts, parts):
+            for k, v in part.items():
+                out[k].append(v)
     return {k: np.concatenate(v) for k, v in out.items()}
 
 
