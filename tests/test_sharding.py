@@ -8,6 +8,8 @@ import subprocess
 import sys
 import textwrap
 
+import pytest
+
 SCRIPT = textwrap.dedent(
     """
     import jax, jax.numpy as jnp, numpy as np
@@ -135,3 +137,7 @@ def test_host_workers_one_per_cpu_core_or_as_set(monkeypatch):
         assert host_workers(default_mesh(jax.devices()[:1])) == max(1, cores)
     monkeypatch.setenv("VHCJAX_HOST_WORKERS", "3")
     assert host_workers() == 3
+    for bad in ("0", "two", "-1"):
+        monkeypatch.setenv("VHCJAX_HOST_WORKERS", bad)
+        with pytest.raises(ValueError, match="VHCJAX_HOST_WORKERS must be a positive integer"):
+            host_workers()

@@ -115,9 +115,11 @@ def host_workers(mesh=None):
     already given a device of `mesh`. One on other platforms (a GPU queues its programs).
     The environment variable `VHCJAX_HOST_WORKERS` overrides it (1: one chunk at a time).
     """
-    env = os.environ.get("VHCJAX_HOST_WORKERS")
+    env = os.environ.get("VHCJAX_HOST_WORKERS", "").strip()
     if env:
-        return max(1, int(env))
+        if not env.isdigit() or int(env) < 1:
+            raise ValueError(f"VHCJAX_HOST_WORKERS must be a positive integer, got {env!r}")
+        return int(env)
     devices = (default_mesh() if mesh is None else mesh).devices.ravel()
     if any(d.platform != "cpu" for d in devices):
         return 1
