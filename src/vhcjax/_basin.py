@@ -11,7 +11,6 @@ compilation, bounded memory, and a chunk stops as soon as all its members are de
 """
 
 import math
-from concurrent.futures import ThreadPoolExecutor
 
 import equinox as eqx
 import jax
@@ -22,7 +21,7 @@ from ._compile import filter_jit
 from ._bisection import bisect_threshold
 from ._hybrid import FAST_CONFIG
 from ._recovery import CONVERGED, recover
-from ._sharding import host_workers, round_to_devices, shard_batch
+from ._sharding import host_workers, map_in_order, round_to_devices, shard_batch
 
 SECTION_NAMES = ("q1", "dq1", "dq2")
 BASIN_CONFIG = FAST_CONFIG
@@ -66,16 +65,9 @@ def classify_section_points(model, z_star, z, *, num_steps=50, tol=1e-4, chunk=1
                 "result": np.asarray(rec.result._value)[:keep],
                 "z_final": np.asarray(zf)[:keep]}
 
-    starts = list(range(0, n, chunk))
-    workers = max(1, min(host_workers(mesh), len(starts)))
-    out = {k: [] for k in ("label", "steps", "period", "result", "z_final")}
     # On a CPU, one chunk per core at a time (XLA runs a program on one core); in order.
-    with ThreadPoolExecutor(workers) as pool:
-        parts = pool.map(run, starts) if workers > 1 else map(run, starts)
-        for _, part in zip(progress(starts) if progress is not None else starts, parts):
-            for k, v in part.items():
-                out[k].append(v)
-    return {k: np.concatenate(v) for k, v in out.items()}
+    parts = map_in_order(run, range(0, n, chunk), host_workers(mesh), progress)
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
 class BasinSlice(eqx.Module):

@@ -245,7 +245,7 @@ def _phi_field_unit(s, y, args):
     """`_phi_field` over $s \\in [0, 1]$, $\\theta = a + s (c - a)$: the integration
     interval is static, so diffrax inserts no runtime check of its direction (a host
     callback, which would keep the compiled program out of JAX's persistent cache).
-    The steps and error estimates are those of the integration over $\theta$."""
+    The steps and error estimates are those of the integration over $\\theta$."""
     a, span, field_args = args
     return span * _phi_field(a + s * span, y, field_args)
 
@@ -1058,8 +1058,9 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     the chunks run concurrently, one per core (`_sharding.host_workers`; XLA runs each
     program on one core), and a batch of more than 8 members per core is split into one
     chunk per core. Each padded batch is split over the devices of `mesh` (several GPUs,
-    or CPU devices with `XLA_FLAGS=--xla_force_host_platform_device_count=N`). Results are
-    identical however the batch is chunked or split.
+    or CPU devices with `XLA_FLAGS=--xla_force_host_platform_device_count=N`). Results do
+    not depend on the threads; a different split (another program size) changes them by
+    rounding only (3.4e-13 measured), with the same result codes.
 
     **Returns:** a `Gait` with a leading batch axis; check `result` per member.
     """

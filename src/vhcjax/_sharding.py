@@ -127,19 +127,29 @@ def host_workers(mesh=None):
     return max(1, (cores or 1) // devices.size)
 
 
+def map_in_order(fn, items, workers=1, progress=None):
+    """`[fn(x) for x in items]`, up to `workers` calls at once from a pool of host threads
+    (see `host_workers`), results in the order of `items`; `progress` optionally wraps
+    `items` (a progress bar that advances as the results come in)."""
+    items = list(items)
+    ticks = progress(items) if progress is not None else items
+    workers = max(1, min(workers, len(items)))
+    if workers == 1:
+        return [fn(x) for x in ticks]
+    with ThreadPoolExecutor(workers) as pool:
+        results = pool.map(lambda x: jax.block_until_ready(fn(x)), items)
+        return [r for _, r in zip(ticks, results)]
+
+
 def in_chunks(fn, n, chunk, workers=1):
     """`fn(i, j)` on the slices `[i, j)` of a batch of `n`, `chunk` at a time, results
     concatenated along the batch axis (a host loop: each call is one dispatch).
 
-    With `workers > 1`, up to `workers` chunks run at once from a pool of threads, for
-    a CPU where each program runs on one core (see `host_workers`). The chunks are
-    independent, so the results are the same as one at a time; JAX traces and compiles a
-    program once even when several threads call it first.
+    With `workers > 1`, up to `workers` chunks run at once (`map_in_order`), for a CPU
+    where each program runs on one core (see `host_workers`). The chunks are independent,
+    so the results are the same as one at a time; JAX traces and compiles a program once
+    even when several threads call it first.
     """
     bounds = [(i, min(i + chunk, n)) for i in range(0, n, chunk)]
-    if workers > 1 and len(bounds) > 1:
-        with ThreadPoolExecutor(min(workers, len(bounds))) as pool:
-            parts = list(pool.map(lambda b: jax.block_until_ready(fn(*b)), bounds))
-    else:
-        parts = [fn(i, j) for i, j in bounds]
+    parts = map_in_order(lambda b: fn(*b), bounds, workers)
     return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
