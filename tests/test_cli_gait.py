@@ -82,24 +82,26 @@ import vhcjax as vj
 logging.basicConfig(stream=sys.stderr)
 logging.getLogger("jax._src.compiler").setLevel(logging.DEBUG)
 vj.enable_compilation_cache(sys.argv[1])
-g = vj.find_gait(vj.CompassGait(), "stable", "vhc", guess=(0.2, -1.0))
-print(repr(float(g.a)), repr(float(g.b)), repr(float(g.T)))
+for method in ("vhc", "shooting"):
+    g = vj.find_gait(vj.CompassGait(), "stable", method, guess=(0.2, -1.0))
+    print(repr(float(g.a)), repr(float(g.b)), repr(float(g.T)))
 """
 
 
 def test_compiled_search_kept_on_disk_and_read_back(tmp_path):
-    """`enable_compilation_cache`: the VHC search's program is stored, a second process
-    reads it back (JAX reports a cache hit) and finds the same gait."""
+    """`enable_compilation_cache`: the programs of both searches are stored (neither holds
+    a host callback), a second process reads them back (JAX reports two cache hits) and
+    finds the same gaits."""
     cache = tmp_path / "xla"
     env = dict(os.environ)
     cmd = [sys.executable, "-c", SCRIPT_CACHE, str(cache)]
     first = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert first.returncode == 0, first.stderr[-2000:]
     stored = sorted(p.name for p in cache.iterdir())
-    assert any(name.startswith("jit__search-") for name in stored), stored
+    assert sum(name.startswith("jit__search-") for name in stored) == 2, stored
     second = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert second.returncode == 0, second.stderr[-2000:]
-    assert "Persistent compilation cache hit for 'jit__search'" in second.stderr
+    assert second.stderr.count("Persistent compilation cache hit for 'jit__search'") == 2
     assert second.stdout == first.stdout
 
 

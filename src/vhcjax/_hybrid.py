@@ -1,8 +1,8 @@
 """Exact hybrid simulation: swing phase to heel strike (diffrax event) + reset map.
 
-One step is a `diffrax.diffeqsolve` stopped by a `diffrax.Event` whose root finder locates
-the heel strike exactly (and differentiably: with `diffrax.ForwardMode` the event-time
-sensitivity is part of `jax.jacfwd`), followed by the impact map and leg relabelling
+One step is an adaptive solve stopped by an event whose root finder locates the heel strike
+exactly (`_event_solve.solve_to_event`: differentiable in forward mode, event-time
+sensitivity included, without host callbacks), followed by the impact map and leg relabelling
 (thesis 3.35). Many steps are a `lax.scan`. Falls, missed strikes, unphysical impacts and
 non-finite states are result codes per member, never silent NaNs, and never a Python `if`
 on a traced value.
@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from ._compile import filter_jit
+from ._event_solve import solve_to_event
 from . import trig
 from ._results import RESULTS
 from ._sharding import round_to_devices, shard_batch
@@ -93,6 +94,12 @@ def flow(
     `Solution`.
     """
     vf = model.vector_field if vector_field is None else vector_field
+    if event and saveat is None and adjoint is None:
+        ev = _event(model, gate)
+        return solve_to_event(
+            vf, ev.cond_fn, ev.direction, x0, None, t0, t1, solver=_solver(config.solver),
+            rtol=config.rtol, atol=config.atol, max_steps=config.max_steps,
+        )
     return diffrax.diffeqsolve(
         diffrax.ODETerm(vf),
         _solver(config.solver),
@@ -175,20 +182,20 @@ def _swing(model, x0, t_max, alive, config, adjoint, vector_field):
         sol = flow(model, x0, t1, config, adjoint=adjoint, vector_field=vector_field)
         return sol.ys[-1], sol.ts[-1], _classify_solve(sol)
     field, event = _latched(model, vector_field)
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(field),
-        _solver(config.solver),
-        t0=0.0,
-        t1=t1,
-        dt0=None,
-        y0=jnp.concatenate([x0, jnp.zeros((1,), x0.dtype)]),
-        stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
-        saveat=diffrax.SaveAt(t1=True),
-        event=event,
-        max_steps=config.max_steps,
-        adjoint=diffrax.ForwardMode() if adjoint is None else adjoint,
-        throw=False,
-    )
+    y0 = jnp.concatenate([x0, jnp.zeros((1,), x0.dtype)])
+    if adjoint is None:
+        sol = solve_to_event(
+            field, event.cond_fn, event.direction, y0, None, 0.0, t1,
+            solver=_solver(config.solver), rtol=config.rtol, atol=config.atol,
+            max_steps=config.max_steps,
+        )
+    else:
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(field), _solver(config.solver), t0=0.0, t1=t1, dt0=None, y0=y0,
+            stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
+            saveat=diffrax.SaveAt(t1=True), event=event, max_steps=config.max_steps,
+            adjoint=adjoint, throw=False,
+        )
     return sol.ys[-1][:-1], sol.ts[-1], _classify_solve(sol)
 
 

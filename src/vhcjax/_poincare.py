@@ -3,8 +3,8 @@
 The section is the set of post-impact states (the relabelled switching surface); its
 coordinates come from `model.state_to_section` / `model.section_to_state` (for the
 compass gait $z = (q_1, \\dot q_1, \\dot q_2)$, $q_2 = -q_1 - 2\\psi$). The map is
-differentiable by forward-mode autodiff through the heel-strike event
-(`diffrax.ForwardMode`), event-time sensitivity included; its Jacobian gives the Floquet
+differentiable by forward-mode autodiff through the heel-strike event (`_event_solve`:
+variational equations and the event-time tangent); its Jacobian gives the Floquet
 multipliers of a gait, independently of the transverse linearization (thesis ch. 6).
 """
 

@@ -26,6 +26,7 @@ import optimistix as optx
 
 from ._compile import filter_jit
 from ._compass_gait import CompassGait
+from ._event_solve import solve_to_event
 from ._hybrid import DEFAULT_CONFIG, FAST_CONFIG, _solver, _step, simulate
 from . import _poincare
 from ._poincare import fixed_point, jacobian, step_map
@@ -184,11 +185,10 @@ def _midswing_event():
 
 
 def _flow_event(model, x0, event, config):
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(model.vector_field), _solver(config.solver), t0=0.0,
-        t1=config.t_max_factor * model.time_scale, dt0=None, y0=x0,
-        stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
-        event=event, max_steps=config.max_steps, adjoint=diffrax.ForwardMode(), throw=False,
+    sol = solve_to_event(
+        model.vector_field, (event.cond_fn,), (event.direction,), x0, None, 0.0,
+        config.t_max_factor * model.time_scale, solver=_solver(config.solver),
+        rtol=config.rtol, atol=config.atol, max_steps=config.max_steps,
     )
     ok = sol.result == diffrax.RESULTS.event_occurred
     return sol.ys[-1], sol.ts[-1], ok

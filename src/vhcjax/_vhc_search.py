@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from ._event_solve import solve_to_event
 from ._results import RESULTS
 from ._vhc import constraint, phi_second_derivative
 
@@ -76,11 +77,9 @@ def vhc_orbit(model, z, *, rtol=1e-11, atol=1e-11, max_steps=4096):
     event = diffrax.Event(
         (strike, bad), root_finder=optx.Newton(rtol=1e-13, atol=1e-13), direction=(False, None)
     )
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(_field), diffrax.Tsit5(), t0=-theta0, t1=-theta0 + jnp.pi,
-        dt0=None, y0=y0, args=(model, E0, sign),
-        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-        event=event, max_steps=max_steps, adjoint=diffrax.ForwardMode(), throw=False,
+    sol = solve_to_event(
+        _field, event.cond_fn, event.direction, y0, (model, E0, sign), -theta0,
+        -theta0 + jnp.pi, solver=diffrax.Tsit5(), rtol=rtol, atol=atol, max_steps=max_steps,
     )
     s_end, y_end = sol.ts[-1], sol.ys[-1]
     phi, dphi = y_end[:k], y_end[k : 2 * k]
