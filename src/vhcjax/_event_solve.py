@@ -60,13 +60,29 @@ def solve_to_event(
     # Closed-over arrays (a model, push parameters) become explicit inputs, so that their
     # tangents reach the rule below instead of being lost in a closure.
     fns = (
-        eqx.filter_closure_convert(field, t, y0, args),
+        _Jitted(eqx.filter_closure_convert(field, t, y0, args)),
         tuple(eqx.filter_closure_convert(c, t, y0, args) for c in conds),
     )
     return _solve(
         (fns, args), y0, t0, t1, directions=tuple(directions), solver=solver, rtol=rtol,
         atol=atol, max_steps=max_steps, norm=norm,
     )
+
+
+class _Jitted(eqx.Module):
+    """A closure-converted field, called through `jax.jit`: diffrax traces the field
+    several times (initial step size, solver state, step, event), and every call after
+    the first reuses the first one's jaxpr."""
+
+    fn: eqx.Module
+
+    def __call__(self, t, y, args):
+        return _call_jit(self.fn, t, y, args)
+
+
+@eqx.filter_jit
+def _call_jit(fn, t, y, args):
+    return fn(t, y, args)
 
 
 def _cond_call(cond, a):

@@ -250,6 +250,10 @@ def _phi_field_unit(s, y, args):
     return span * _phi_field(a + s * span, y, field_args)
 
 
+# diffrax traces the field several times; jitted, the later traces reuse the first jaxpr.
+_phi_field_unit_jit = eqx.filter_jit(_phi_field_unit)
+
+
 def _with_tolerance(config, tol):
     """`config` with `rtol = tol` and `atol` scaled alike (`tol` may be traced: the
     inexact Newton iterations of `damped_newton`); `tol=None` leaves it unchanged."""
@@ -287,7 +291,7 @@ def _boundary_abd(model, data, a, b, d, real, config):
     sign = jnp.sign(b)
     dth2_a, det_a = singularity_terms(model, E0, a, y0[0:1], y0[1:2])
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(_phi_field_unit),
+        diffrax.ODETerm(_phi_field_unit_jit),
         _solver(config.solver),
         t0=0.0,
         t1=1.0,

@@ -224,6 +224,11 @@ def _joint_vector_field(t, u, args):
     ])
 
 
+# diffrax traces the field five times (initial step, solver state, step); jitted, the
+# later traces reuse the first one's jaxpr.
+_joint_vector_field_jit = eqx.filter_jit(_joint_vector_field)
+
+
 def transverse_linearization(model, x_plus, x_minus, period, *, rtol=1e-11, atol=1e-11,
                              max_steps=4096):
     """Multipliers of a gait by transverse linearization (thesis 6.40-6.42, Steps 1-6).
@@ -262,7 +267,7 @@ def transverse_linearization(model, x_plus, x_minus, period, *, rtol=1e-11, atol
     event = diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13),
                           direction=False)
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(_joint_vector_field), diffrax.Tsit5(), t0=0.0, t1=2.0 * period,
+        diffrax.ODETerm(_joint_vector_field_jit), diffrax.Tsit5(), t0=0.0, t1=2.0 * period,
         dt0=None, y0=u0, args=(model, E0),
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
         event=event, max_steps=max_steps, throw=False,
