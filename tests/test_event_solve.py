@@ -42,7 +42,9 @@ def _closed_form(h, v0, g, c, t0, tau):
     y = h + v0 * s - g * s**2 / 2 + c * ((tau**3 - t0**3) / 6 - t0**2 * s / 2)
     v = v0 - g * s + c * (tau**2 - t0**2) / 2
     a = -g + c * tau
-    dy = np.array([1.0, s, -(s**2) / 2, (tau**3 - t0**3) / 6 - t0**2 * s / 2, -v0 + g * s - c * t0 * s])
+    dy = np.array(
+        [1.0, s, -(s**2) / 2, (tau**3 - t0**3) / 6 - t0**2 * s / 2, -v0 + g * s - c * t0 * s]
+    )
     dv = np.array([0.0, 1.0, -s, (tau**2 - t0**2) / 2, g - c * t0])
     dtau = -dy / v  # implicit function theorem on y(tau; p) = 0
     return y, np.stack([dtau, dv + a * dtau])

@@ -1,10 +1,11 @@
 """Integration to a root-found event, forward-differentiable by variational equations.
 
 The heel strike ends each swing at the root $\\tau$ of a switching function
-$c(t, y(t), p)$ (thesis 3.37-3.38). diffrax differentiates its event time through
-optimistix's implicit-function rule, whose lineax linear solve carries an error check:
-a host callback, and a program that holds one stays out of JAX's persistent compilation
-cache. `solve_to_event` is the same integration with a forward-mode rule of its own:
+$c(t, y(t), p)$ (the switching surface of thesis 3.31 in the hybrid system 3.35).
+diffrax differentiates its event time through optimistix's implicit-function rule,
+whose lineax linear solve carries an error check: a host callback, and a program that
+holds one stays out of JAX's persistent compilation cache. `solve_to_event` is the same
+integration with a forward-mode rule of its own:
 
 - the tangent $\\delta y$ rides along in the same solve, as the variational equation
   $\\dot{\\delta y} = \\partial_y f\\,\\delta y + \\partial_p f\\,\\delta p$ (a `jvp` of the
