@@ -143,7 +143,6 @@ def _solve_jvp(primals, tangents, *, directions, solver, rtol, atol, max_steps, 
     dy0 = jtu.tree_map(jnp.zeros_like, y0) if dy0 is None else dy0
     t0 = jnp.asarray(t0, dtype)
     t1 = jnp.asarray(t1, dtype)
-    dt0 = jnp.zeros_like(t0) if dt0 is None else dt0
     dt1 = jnp.zeros_like(t1) if dt1 is None else dt1
 
     def f_of(p, t, y):
@@ -157,8 +156,8 @@ def _solve_jvp(primals, tangents, *, directions, solver, rtol, atol, max_steps, 
 
         return c
 
-    # A later start is an earlier state: y(t0 + e) = y0 means y(t0) = y0 - f e.
-    dy0 = _axpy(-dt0, f_of(params, t0, y0), dy0)
+    if dt0 is not None:  # a later start is an earlier state: y(t0 + e) = y0, y(t0) = y0 - f e
+        dy0 = _axpy(-dt0, f_of(params, t0, y0), dy0)
 
     def aug_field(t, yy, _):  # the field and its variational equation
         return eqx.filter_jvp(lambda p, y: f_of(p, t, y), (params, yy[0]), (dparams, yy[1]))
