@@ -96,3 +96,21 @@ def test_walker_step_jacobian_agrees_with_diffrax_and_a_tight_reference(walker_s
     ref = jax.jit(jax.jacfwd(lambda x: _step_out(model, x, tight)))(x0)
     assert np.abs(ours - theirs).max() < 1e-7
     assert np.abs(ours - ref).max() < 5e-9
+
+
+def test_second_derivatives_equal_differences_of_first_ones():
+    """Second-order forward mode goes through the same rule (its augmented solve is a
+    `solve_to_event` too), here in parameters only, so the inner start tangent is a
+    symbolic zero; against central differences of the first derivatives (themselves
+    checked against the closed form above)."""
+
+    def first(g, c):
+        return jnp.stack(jax.jacfwd(lambda gg, cc: _thrown(H, V0, gg, cc, T0)[0],
+                                    argnums=(0, 1))(g, c), -1)
+
+    g, c = jnp.asarray(G), jnp.asarray(C)
+    second = np.stack(jax.jacfwd(first, argnums=(0, 1))(g, c), -1)
+    eps = 1e-5
+    fd = np.stack([(first(g + eps, c) - first(g - eps, c)) / (2 * eps),
+                   (first(g, c + eps) - first(g, c - eps)) / (2 * eps)], -1)
+    np.testing.assert_allclose(second, fd, rtol=1e-6, atol=1e-8)

@@ -140,7 +140,12 @@ def _solve_jvp(primals, tangents, *, directions, solver, rtol, atol, max_steps, 
     params, dparams = _differentiated(params, dparams)
     (field, conds), args = params
     dtype = jtu.tree_leaves(y0)[0].dtype
-    dy0 = jtu.tree_map(jnp.zeros_like, y0) if dy0 is None else dy0
+    if dy0 is None:
+        dy0 = jtu.tree_map(lambda _: None, y0)
+    # Symbolic zeros, also single leaves of a pytree state (the second-order rule's), as
+    # arrays: they are states of the variational equation.
+    dy0 = jtu.tree_map(lambda p, t: jnp.zeros_like(p) if t is None else t, y0, dy0,
+                       is_leaf=lambda x: x is None)
     t0 = jnp.asarray(t0, dtype)
     t1 = jnp.asarray(t1, dtype)
     dt1 = jnp.zeros_like(t1) if dt1 is None else dt1
