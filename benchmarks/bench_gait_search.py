@@ -53,7 +53,7 @@ def main(argv=None):
     import jax.numpy as jnp
 
     import vhcjax as vj
-    from vhcjax import _gait
+    from vhcjax import _compile, _gait
 
     sizes = [int(s) for s in args.sizes.split(",")]
     pool = None
@@ -80,8 +80,9 @@ def main(argv=None):
                 return g
 
             # Each entry's compile time from cold caches, as in a fresh process (without
-            # this, an entry would reuse traces of the functions the ones before it share).
-            jax.clear_caches()
+            # this, an entry would reuse traces of the functions the ones before it share):
+            # JAX's caches and the programs vhcjax keeps itself (`_compile.compile_pair`).
+            _compile.clear_caches()
             t0 = time.perf_counter()
             g = run()
             first = time.perf_counter() - t0
@@ -135,7 +136,6 @@ def main(argv=None):
                       f"{row['ratio_vs_pool']:8.1f}", flush=True)
     if pool is not None:
         pool.close()
-    from vhcjax import _compile
 
     info = dict(device=str(jax.devices()[0]), num_devices=len(jax.devices()), cpus=os.cpu_count(),
                 python=platform.python_version(), jax=jax.__version__,

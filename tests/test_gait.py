@@ -161,6 +161,27 @@ def test_chord_finish_gives_the_newton_gaits_and_codes(gaits, method):
     assert np.all(np.isfinite(np.asarray(chord.x_plus)))
 
 
+def test_chord_search_as_two_programs_equals_one_program():
+    """On one device a batch with the chord finish runs as two programs, the Newton loop
+    and the chord loop, compiled concurrently (`_compile.compile_pair`): the gaits and
+    codes are bitwise those of the single program, and a second call compiles nothing."""
+    from vhcjax import _compile
+
+    guesses = jnp.array([SEED, SEED, (2.5, 8.0), (0.2, 0.0)])
+    model = _gait._with_psi(vj.CompassGait(), jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0])))
+    axes = _gait._batched_axes(model)
+    sign = _gait.family_sign("stable")
+    two = _gait._staged_search(model, guesses, sign, "vhc", axes)
+    kept = len(_compile._pairs)
+    one = _gait._search_batch(model, guesses, sign, "vhc", "newton", axes, True)
+    assert vj.result_names(two.result)[:3] == ["successful", "successful", "no_real_root"]
+    for a, b in zip(jax.tree_util.tree_leaves(two), jax.tree_util.tree_leaves(one)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    again = _gait._staged_search(model, guesses, sign, "vhc", axes)
+    assert len(_compile._pairs) == kept
+    np.testing.assert_array_equal(np.asarray(again.x_plus), np.asarray(two.x_plus))
+
+
 def test_chord_steps_keep_the_jacobian():
     """`damped_newton(chord_below=...)`: from the first point with a residual below the
     threshold the Jacobian is frozen. With an infinite threshold every step uses the

@@ -16,6 +16,8 @@ once, on the first compile); elsewhere, or with the environment variable
 
 import functools
 import os
+import threading
+from concurrent.futures import ThreadPoolExecutor
 
 import equinox as eqx
 import jax
@@ -87,6 +89,66 @@ def filter_jit(fun=None, **kwargs):
     return _Jit(fun, kwargs)
 
 
+_pairs = {}
+_pairs_lock = threading.Lock()
+
+
+def signature(tree):
+    """What a program compiled for `tree` is specific to: the tree structure, the shape,
+    dtype and weak type of each array, and the value of every other leaf."""
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    return treedef, tuple(
+        (x.shape, x.dtype, x.weak_type) if isinstance(x, jax.Array) else x for x in leaves
+    )
+
+
+def compile_pair(key, first, second, args):
+    """Two programs that run one after the other, `state = first(*args)` and then
+    `second(*args, state)`, compiled concurrently: `second` is traced and compiled on this
+    thread while XLA compiles `first` on another (XLA releases the interpreter lock).
+    Kept by `key`, which must hold everything the two programs depend on besides the
+    arrays of `args` (e.g. `signature(args)`); `clear_caches` forgets them.
+
+    XLA's time grows faster than the size of a program: two halves compile in less time
+    than the whole, even one after the other, and on two cores they overlap.
+
+    **Returns:** `(first, second)`, compiled: call them with the arrays of `args` (and the
+    state), as `first(*args)` and `second(*args, state)`.
+    """
+    with _pairs_lock:  # one compilation per key, also when host threads ask at once
+        if key not in _pairs:
+            dynamic, static = eqx.partition(args, eqx.is_array)
+
+            def jit(fn):
+                return jax.jit(lambda *a: fn(*eqx.combine(a[: len(args)], static), *a[len(args):]),
+                               compiler_options=compiler_options())
+
+            lowered = jit(first).trace(*dynamic).lower()
+            with ThreadPoolExecutor(1) as pool:
+                compiling = pool.submit(lowered.compile)
+                state = jax.tree_util.tree_map(
+                    lambda o: jax.ShapeDtypeStruct(o.shape, o.dtype), lowered.out_info
+                )
+                second_compiled = jit(second).trace(*dynamic, state).lower().compile()
+                _pairs[key] = (compiling.result(), second_compiled)
+        first_compiled, second_compiled = _pairs[key]
+
+    def run_first(*a):
+        return first_compiled(*eqx.filter(a, eqx.is_array))
+
+    def run_second(*a):
+        return second_compiled(*eqx.filter(a[:-1], eqx.is_array), a[-1])
+
+    return run_first, run_second
+
+
+def clear_caches():
+    """`jax.clear_caches()` and the programs kept by `compile_pair`."""
+    with _pairs_lock:
+        _pairs.clear()
+    jax.clear_caches()
+
+
 def default_cache_dir():
     """Where `enable_compilation_cache` keeps compiled programs by default:
     `$XDG_CACHE_HOME/vhcjax/xla` (`~/.cache/vhcjax/xla`)."""
@@ -102,10 +164,9 @@ def enable_compilation_cache(directory=None):
 
     It saves the XLA part of a compilation, not the tracing: the batched VHC search
     compiles in about 4 s instead of 8-10 s from the second process on (2-core CPU).
-    Programs holding a host callback are not stored: that leaves out the shooting search,
-    whose Jacobian differentiates diffrax's heel-strike root finder through a linear
-    solve that carries an error check. The `vhcjax` command calls this when the
-    environment variable `VHCJAX_CACHE_DIR` names a directory.
+    Programs holding a host callback are not stored (none of the searches or multiplier
+    computations holds one). The `vhcjax` command calls this when the environment
+    variable `VHCJAX_CACHE_DIR` names a directory.
 
     **Returns:** the directory used (default: `default_cache_dir()`).
     """

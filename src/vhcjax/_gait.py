@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from ._compile import filter_jit
+from ._compile import compile_pair, filter_jit, signature
 from . import _poincare
 from ._hybrid import DEFAULT_CONFIG, SolverConfig, _step
 from ._results import RESULTS
@@ -420,12 +420,8 @@ def vhc_search(
     ab0 = jnp.asarray(guess, dtype=float)[..., :2]
     res_fn = lambda ab: vhc_residual(model, ab, family, config)  # noqa: E731
     if solver == "newton":
-        return _newton_search(
-            lambda m, x, tol: _vhc_eval(m, x, family, config, tol),
-            lambda m, ab, r, bd, k: _finish_vhc(m, bd, k, jnp.isfinite(ab).all(), family, config),
-            model, ab0, axes, chord, rtol=rtol, atol=atol, max_steps=max_steps,
-            tolerances=(_LOOSE_TOL, config.rtol), residual_cap=_RESIDUAL_CAP,
-        )
+        return _vhc_newton(model, ab0, family, config, chord, axes, rtol=rtol, atol=atol,
+                           max_steps=max_steps)
     if solver == "lm":
         ab, iters = _levenberg_marquardt(res_fn, ab0, rtol, atol, 4 * max_steps)
     elif solver == "optimistix":
@@ -444,16 +440,48 @@ def vhc_search(
     return _finish_vhc(model, bd, iters, finite, family, config)
 
 
-def _newton_search(evaluate, finish, model, x0, axes, chord, **newton):
+def _evaluate_member(kind, model, x, family, config, tol):
+    """The residual and aux of one member of a search: `kind` is the method."""
+    if kind == "vhc":
+        return _vhc_eval(model, x, family, config, tol)
+    return _shoot_eval(model, x, config, tol)
+
+
+@eqx.filter_jit
+def _evaluate_batch(kind, config, axes, model, X, T, family):
+    """`_evaluate_member` on a batch. Jitted with static `kind`, `config`, `axes`: the
+    programs of the Newton and the chord loop (`stage`) trace it once between them."""
+    member = lambda m, x, t: _evaluate_member(kind, m, x, family, config, t)  # noqa: E731
+    return eqx.filter_vmap(member, in_axes=(axes, 0, 0))(model, X, T)
+
+
+def _vhc_newton(model, ab0, family, config=VHC_CONFIG, chord=False, axes=None, stage=None,
+                state=None, rtol=1e-11, atol=1e-11, max_steps=50):
+    """`vhc_search` with `solver="newton"` (and its `stage`s, see `damped_newton_batch`)."""
+    return _newton_search(
+        "vhc", config, family,
+        lambda m, ab, r, bd, k: _finish_vhc(m, bd, k, jnp.isfinite(ab).all(), family, config),
+        model, ab0, axes, chord, stage, state, rtol=rtol, atol=atol, max_steps=max_steps,
+        tolerances=(_LOOSE_TOL, config.rtol), residual_cap=_RESIDUAL_CAP,
+    )
+
+
+def _newton_search(kind, config, family, finish, model, x0, axes, chord, stage=None, state=None,
+                   **newton):
     """`damped_newton` on one member (`axes=None`) or `damped_newton_batch` on a batch
-    (`model` batched along `axes`, `x0`: `(B, n)`). `evaluate(model, x, tol) -> (r, aux)`
-    and `finish(model, x, r, aux, iterations) -> Gait` are written for one member."""
+    (`model` batched along `axes`, `x0`: `(B, n)`) of `_evaluate_member(kind, ...)`;
+    `finish(model, x, r, aux, iterations) -> Gait` is written for one member. `stage`,
+    `state`: as in `damped_newton_batch` (the `"chord"` stage returns the gaits)."""
     newton["chord_below"] = _CHORD_BELOW if chord else None
     if axes is None:
-        x, r, aux, k = damped_newton(lambda x, tol: evaluate(model, x, tol), x0, **newton)
+        evaluate = lambda x, tol: _evaluate_member(kind, model, x, family, config, tol)  # noqa: E731
+        x, r, aux, k = damped_newton(evaluate, x0, **newton)
         return finish(model, x, r, aux, k)
-    fn = lambda X, T: eqx.filter_vmap(evaluate, in_axes=(axes, 0, 0))(model, X, T)  # noqa: E731
-    X, R, aux, k = damped_newton_batch(fn, x0, **newton)
+    fn = lambda X, T: _evaluate_batch(kind, config, axes, model, X, T, family)  # noqa: E731
+    out = damped_newton_batch(fn, x0, stage=stage, state=state, **newton)
+    if stage == "newton":
+        return out
+    X, R, aux, k = out
     return eqx.filter_vmap(finish, in_axes=(axes, 0, 0, 0, 0))(model, X, R, aux, k)
 
 
@@ -531,7 +559,8 @@ def batch_jacobian(fn, X):
 
 
 def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10,
-                        tolerances=None, chord_below=None, residual_cap=jnp.inf):
+                        tolerances=None, chord_below=None, residual_cap=jnp.inf, stage=None,
+                        state=None):
     r"""`damped_newton` on every member of a batch at once, written out along the leading
     axis (`X0`: `(B, n)`; `fn(X, tol) -> (R, aux)` with `tol`: `(B,)`, each row of `R`
     depending on its own row of `X` only, every leaf of `aux` with the batch axis first).
@@ -542,6 +571,10 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
     times larger) forward-mode evaluation (measured: 0.6-0.8 s less tracing for 128
     members with the chord finish). `tolerances` as in `damped_newton` (`None`: `tol` is
     ignored).
+
+    `stage` splits the two loops into two programs (compiled concurrently by
+    `_compile.compile_pair`): `"newton"` returns the loop state after the Newton loop,
+    `"chord"` runs the chord loop from that `state` (`X0` then only gives shapes).
 
     **Returns:** `(X, R, aux, iterations)`, each with the leading batch axis.
     """
@@ -561,8 +594,9 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
     def evaluate_traced(X, tol):
         return batch_jacobian(lambda Y: residual_jaxpr(Y, tol, *rconsts), X)
 
-    evaluate_jaxpr, consts = jax.closure_convert(evaluate_traced, X0, tol0)
-    evaluate = lambda X, tol, J: evaluate_jaxpr(X, tol, *consts)  # noqa: E731
+    if stage != "chord":  # the chord stage has no forward-mode evaluation to trace
+        evaluate_jaxpr, consts = jax.closure_convert(evaluate_traced, X0, tol0)
+        evaluate = lambda X, tol, J: evaluate_jaxpr(X, tol, *consts)  # noqa: E731
 
     def where(mask, a, b):  # per member
         return jnp.where(jnp.reshape(mask, mask.shape + (1,) * (jnp.ndim(a) - 1)), a, b)
@@ -625,12 +659,17 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
 
         return body
 
-    R_shape, J_shape, aux_shape = jax.eval_shape(evaluate, X0, tol0, None)
-    zeros = lambda t: jax.tree_util.tree_map(  # noqa: E731
-        lambda l: jnp.zeros(l.shape, l.dtype) + jnp.reshape(tie, (B,) + (1,) * (len(l.shape) - 1)).astype(l.dtype), t)
-    init = (X0, zeros(R_shape), zeros(J_shape), zeros(aux_shape),
-            tie.astype(int) - 1, tie.astype(int), tie != 0, tie, tie != 0)
-    carry = jax.lax.while_loop(lambda c: jnp.any(iterating(c)), make_body(evaluate, iterating), init)
+    if stage == "chord":
+        carry = state
+    else:
+        R_shape, J_shape, aux_shape = jax.eval_shape(evaluate, X0, tol0, None)
+        zeros = lambda t: jax.tree_util.tree_map(  # noqa: E731
+            lambda l: jnp.zeros(l.shape, l.dtype) + jnp.reshape(tie, (B,) + (1,) * (len(l.shape) - 1)).astype(l.dtype), t)
+        init = (X0, zeros(R_shape), zeros(J_shape), zeros(aux_shape),
+                tie.astype(int) - 1, tie.astype(int), tie != 0, tie, tie != 0)
+        carry = jax.lax.while_loop(lambda c: jnp.any(iterating(c)), make_body(evaluate, iterating), init)
+    if stage == "newton":
+        return carry
     if chord_below is not None:  # the chord loop: the same steps, the residual alone
         def residual(X, tol, J):
             R, aux = residual_jaxpr(X, tol, *rconsts)
@@ -734,22 +773,8 @@ def shooting_search(
     else:
         z0 = eqx.filter_vmap(lambda m, g: complete_guess(m, g, family), in_axes=(axes, 0))(model, guess)
     if solver == "newton":
-        def finish(model, z, r, sr, iters):
-            res = jnp.max(jnp.abs(r))
-            ok = (sr.result == RESULTS.successful) & jnp.isfinite(z).all()
-            code = RESULTS.where(
-                sr.result != RESULTS.successful,
-                sr.result,
-                RESULTS.where(ok & (res < SUCCESS_TOL), RESULTS.successful, RESULTS.not_converged),
-            )
-            return _shooting_gait(model, model.section_to_state(z), sr.x_minus, sr.period,
-                                  iters, res, code, family)
-
-        return _newton_search(
-            lambda m, z, tol: _shoot_eval(m, z, config, tol), finish, model, z0, axes, chord,
-            rtol=rtol, atol=atol, max_steps=max_steps, tolerances=(_LOOSE_TOL, config.rtol),
-            residual_cap=_RESIDUAL_CAP,
-        )
+        return _shooting_newton(model, z0, family, config, chord, axes, rtol=rtol, atol=atol,
+                                max_steps=max_steps)
     if solver != "optimistix":
         raise ValueError(f"solver must be 'newton' or 'optimistix' for shooting, got {solver!r}")
     fp = _poincare.fixed_point(
@@ -758,6 +783,28 @@ def shooting_search(
     sr = _step(model, fp.x0, config)
     return _shooting_gait(model, fp.x0, sr.x_minus, fp.periods[0], fp.iterations, fp.residual,
                           fp.result, family)
+
+
+def _shooting_newton(model, z0, family, config=DEFAULT_CONFIG, chord=False, axes=None,
+                     stage=None, state=None, rtol=1e-12, atol=1e-12, max_steps=40):
+    """`shooting_search` with `solver="newton"` from section points `z0` (and its
+    `stage`s, see `damped_newton_batch`)."""
+    def finish(model, z, r, sr, iters):
+        res = jnp.max(jnp.abs(r))
+        ok = (sr.result == RESULTS.successful) & jnp.isfinite(z).all()
+        code = RESULTS.where(
+            sr.result != RESULTS.successful,
+            sr.result,
+            RESULTS.where(ok & (res < SUCCESS_TOL), RESULTS.successful, RESULTS.not_converged),
+        )
+        return _shooting_gait(model, model.section_to_state(z), sr.x_minus, sr.period,
+                              iters, res, code, family)
+
+    return _newton_search(
+        "shooting", config, family, finish, model, z0, axes, chord, stage, state, rtol=rtol,
+        atol=atol, max_steps=max_steps, tolerances=(_LOOSE_TOL, config.rtol),
+        residual_cap=_RESIDUAL_CAP,
+    )
 
 
 def _shooting_gait(model, x_plus, x_minus, T, iters, res, code, family):
@@ -1031,6 +1078,31 @@ def _search_one(model, guesses, sign, method, solver, chord):
     return jax.tree_util.tree_map(lambda x: x[None], gait)
 
 
+def _search_stage(model, guesses, sign, method, axes, stage, state=None):
+    """One `stage` of the batched Newton search with the chord finish (see
+    `damped_newton_batch`): `"newton"` returns the loop state, `"chord"` the gaits."""
+    if stage == "chord":
+        x0 = state[0]  # shapes only
+    elif method == "vhc" or guesses.shape[-1] == 3:
+        x0 = guesses
+    else:
+        x0 = eqx.filter_vmap(lambda m, g: complete_guess(m, g, sign), in_axes=(axes, 0))(model, guesses)
+    search = _vhc_newton if method == "vhc" else _shooting_newton
+    return search(model, x0, sign, chord=True, axes=axes, stage=stage, state=state)
+
+
+def _staged_search(model, guesses, sign, method, axes):
+    """`_search_batch` with the chord finish (one device) as two programs, the Newton
+    loop and the chord loop, compiled concurrently (`_compile.compile_pair`)."""
+    first, second = compile_pair(
+        ("search", method, signature((model, guesses, sign))),
+        lambda m, g, s: _search_stage(m, g, s, method, axes, "newton"),
+        lambda m, g, s, state: _search_stage(m, g, s, method, axes, "chord", state),
+        (model, guesses, sign),
+    )
+    return second(model, guesses, sign, first(model, guesses, sign))
+
+
 def _from_reference(model, sign, method, num=_HOMOTOPY_STEPS):
     s_buf = jnp.linspace(0.0, 1.0, num)
     gaits, _ = _continue(reference_model(), model, s_buf, num, _seed(sign, method), sign, method)
@@ -1125,6 +1197,8 @@ def _find_chunk(model, guesses, B, P, sign, method, solver, mesh, chord):
     axes = _batched_axes(model)
     if guesses is None:
         gaits = _from_reference_batch(model, sign, method, _HOMOTOPY_STEPS, axes)
+    elif chord and solver == "newton" and device_multiple(mesh) == 1:
+        gaits = _staged_search(model, pad(guesses), sign, method, axes)
     else:
         gaits = _search_batch(model, pad(guesses), sign, method, solver, axes, bool(chord))
     return jax.tree_util.tree_map(lambda x: x[:B], gaits)
