@@ -171,13 +171,13 @@ def test_chord_search_as_two_programs_equals_one_program():
     model = _gait._with_psi(vj.CompassGait(), jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0])))
     axes = _gait._batched_axes(model)
     sign = _gait.family_sign("stable")
-    two = _gait._staged_search(model, guesses, sign, "vhc", axes)
+    two = _gait._staged_search(model, guesses, sign, "vhc", axes, True)
     kept = len(_compile._pairs)
     one = _gait._search_batch(model, guesses, sign, "vhc", "newton", axes, True)
     assert vj.result_names(two.result)[:3] == ["successful", "successful", "no_real_root"]
     for a, b in zip(jax.tree_util.tree_leaves(two), jax.tree_util.tree_leaves(one)):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
-    again = _gait._staged_search(model, guesses, sign, "vhc", axes)
+    again = _gait._staged_search(model, guesses, sign, "vhc", axes, True)
     assert len(_compile._pairs) == kept
     np.testing.assert_array_equal(np.asarray(again.x_plus), np.asarray(two.x_plus))
 

@@ -1078,9 +1078,9 @@ def _search_one(model, guesses, sign, method, solver, chord):
     return jax.tree_util.tree_map(lambda x: x[None], gait)
 
 
-def _search_stage(model, guesses, sign, method, axes, stage, state=None):
-    """One `stage` of the batched Newton search with the chord finish (see
-    `damped_newton_batch`): `"newton"` returns the loop state, `"chord"` the gaits."""
+def _search_stage(model, guesses, sign, method, axes, chord, stage, state=None):
+    """One `stage` of the batched Newton search (see `damped_newton_batch`): `"newton"`
+    returns the loop state, `"chord"` the gaits (after the chord loop if `chord`)."""
     if stage == "chord":
         x0 = state[0]  # shapes only
     elif method == "vhc" or guesses.shape[-1] == 3:
@@ -1088,16 +1088,17 @@ def _search_stage(model, guesses, sign, method, axes, stage, state=None):
     else:
         x0 = eqx.filter_vmap(lambda m, g: complete_guess(m, g, sign), in_axes=(axes, 0))(model, guesses)
     search = _vhc_newton if method == "vhc" else _shooting_newton
-    return search(model, x0, sign, chord=True, axes=axes, stage=stage, state=state)
+    return search(model, x0, sign, chord=chord, axes=axes, stage=stage, state=state)
 
 
-def _staged_search(model, guesses, sign, method, axes):
-    """`_search_batch` with the chord finish (one device) as two programs, the Newton
-    loop and the chord loop, compiled concurrently (`_compile.compile_pair`)."""
+def _staged_search(model, guesses, sign, method, axes, chord):
+    """`_search_batch` (one device) as two programs compiled concurrently
+    (`_compile.compile_pair`): the Newton loop, then the chord loop (with `chord`) and
+    the assembly of the gaits."""
     first, second = compile_pair(
-        ("search", method, signature((model, guesses, sign))),
-        lambda m, g, s: _search_stage(m, g, s, method, axes, "newton"),
-        lambda m, g, s, state: _search_stage(m, g, s, method, axes, "chord", state),
+        ("search", method, chord, signature((model, guesses, sign))),
+        lambda m, g, s: _search_stage(m, g, s, method, axes, chord, "newton"),
+        lambda m, g, s, state: _search_stage(m, g, s, method, axes, chord, "chord", state),
         (model, guesses, sign),
     )
     return second(model, guesses, sign, first(model, guesses, sign))
@@ -1197,8 +1198,8 @@ def _find_chunk(model, guesses, B, P, sign, method, solver, mesh, chord):
     axes = _batched_axes(model)
     if guesses is None:
         gaits = _from_reference_batch(model, sign, method, _HOMOTOPY_STEPS, axes)
-    elif chord and solver == "newton" and device_multiple(mesh) == 1:
-        gaits = _staged_search(model, pad(guesses), sign, method, axes)
+    elif solver == "newton" and device_multiple(mesh) == 1:
+        gaits = _staged_search(model, pad(guesses), sign, method, axes, bool(chord))
     else:
         gaits = _search_batch(model, pad(guesses), sign, method, solver, axes, bool(chord))
     return jax.tree_util.tree_map(lambda x: x[:B], gaits)
