@@ -102,7 +102,7 @@ def signature(tree):
     )
 
 
-def compile_pair(key, first, second, args):
+def compile_pair(key, first, second, args, names=("first", "second")):
     """Two programs that run one after the other, `state = first(*args)` and then
     `second(*args, state)`, compiled concurrently: `second` is traced and compiled on this
     thread while XLA compiles `first` on another (XLA releases the interpreter lock).
@@ -112,6 +112,8 @@ def compile_pair(key, first, second, args):
     XLA's time grows faster than the size of a program: two halves compile in less time
     than the whole, even one after the other, and on two cores they overlap.
 
+    `names`: of the two programs (as JAX and its disk cache show them).
+
     **Returns:** `(first, second)`, compiled: call them with the arrays of `args` (and the
     state), as `first(*args)` and `second(*args, state)`.
     """
@@ -119,17 +121,20 @@ def compile_pair(key, first, second, args):
         if key not in _pairs:
             dynamic, static = eqx.partition(args, eqx.is_array)
 
-            def jit(fn):
-                return jax.jit(lambda *a: fn(*eqx.combine(a[: len(args)], static), *a[len(args):]),
-                               compiler_options=compiler_options())
+            def jit(fn, name):
+                def program(*a):
+                    return fn(*eqx.combine(a[: len(args)], static), *a[len(args):])
 
-            lowered = jit(first).trace(*dynamic).lower()
+                program.__name__ = program.__qualname__ = name  # names the disk-cache entry
+                return jax.jit(program, compiler_options=compiler_options())
+
+            lowered = jit(first, names[0]).trace(*dynamic).lower()
             with ThreadPoolExecutor(1) as pool:
                 compiling = pool.submit(lowered.compile)
                 state = jax.tree_util.tree_map(
                     lambda o: jax.ShapeDtypeStruct(o.shape, o.dtype), lowered.out_info
                 )
-                second_compiled = jit(second).trace(*dynamic, state).lower().compile()
+                second_compiled = jit(second, names[1]).trace(*dynamic, state).lower().compile()
                 _pairs[key] = (compiling.result(), second_compiled)
         first_compiled, second_compiled = _pairs[key]
 

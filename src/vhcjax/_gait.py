@@ -1100,6 +1100,7 @@ def _staged_search(model, guesses, sign, method, axes, chord):
         lambda m, g, s: _search_stage(m, g, s, method, axes, chord, "newton"),
         lambda m, g, s, state: _search_stage(m, g, s, method, axes, chord, "chord", state),
         (model, guesses, sign),
+        names=("search_newton_loop", "search_chord_loop_and_gaits"),
     )
     return second(model, guesses, sign, first(model, guesses, sign))
 
