@@ -289,7 +289,6 @@ def _boundary_abd(model, data, a, b, d, real, config):
     ok0 = jnp.isfinite(y0).all()
     y0 = jnp.where(ok0, y0, jnp.array([e, 0.0, 0.0]))
     sign = jnp.sign(b)
-    dth2_a, det_a = singularity_terms(model, E0, a, y0[0:1], y0[1:2])
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(_phi_field_unit_jit),
         _solver(config.solver),
@@ -305,7 +304,11 @@ def _boundary_abd(model, data, a, b, d, real, config):
         throw=False,
     )
     yc = sol.ys[-1]
-    dth2_c, det_c = singularity_terms(model, E0, c, yc[0:1], yc[1:2])
+    # Both ends in one batched call (one trace of the mass matrix and energies).
+    dth2, det = jax.vmap(lambda th, y: singularity_terms(model, E0, th, y[0:1], y[1:2]))(
+        jnp.stack([a, c]), jnp.stack([y0[:2], yc[:2]])
+    )
+    dth2_a, dth2_c, det_a, det_c = dth2[0], dth2[1], det[0], det[1]
     residual = jnp.stack([yc[0] - g, yc[1] - h / d])
     singular = (
         ~ok0
@@ -352,10 +355,14 @@ def _derived(model, x_plus, x_minus, T):
     return step_length, speed, ke(x_minus) - ke(x_plus)
 
 
-def _make_gait(model, x_plus, x_minus, T, E0, iterations, residual, code, family, method):
+def _make_gait(model, x_plus, x_minus, T, E0, iterations, residual, code, family, method,
+               physical=None):
+    """The `Gait`; `physical`: whether the impact at `x_minus` pushes the foot away from the
+    ground (`None`: computed here)."""
     n = model.n_dof
     step_length, speed, loss = _derived(model, x_plus, x_minus, T)
-    _, _, physical = model.impact(x_minus)
+    if physical is None:
+        _, _, physical = model.impact(x_minus)
     # A periodic solution walking uphill in negative time (thesis 7.17-7.18).
     uphill = (x_plus[n] > 0) | (T < 0)
     code = RESULTS.where(
@@ -782,7 +789,7 @@ def shooting_search(
     )
     sr = _step(model, fp.x0, config)
     return _shooting_gait(model, fp.x0, sr.x_minus, fp.periods[0], fp.iterations, fp.residual,
-                          fp.result, family)
+                          fp.result, family, sr.result != RESULTS.bad_impact)
 
 
 def _shooting_newton(model, z0, family, config=DEFAULT_CONFIG, chord=False, axes=None,
@@ -798,7 +805,7 @@ def _shooting_newton(model, z0, family, config=DEFAULT_CONFIG, chord=False, axes
             RESULTS.where(ok & (res < SUCCESS_TOL), RESULTS.successful, RESULTS.not_converged),
         )
         return _shooting_gait(model, model.section_to_state(z), sr.x_minus, sr.period,
-                              iters, res, code, family)
+                              iters, res, code, family, sr.result != RESULTS.bad_impact)
 
     return _newton_search(
         "shooting", config, family, finish, model, z0, axes, chord, stage, state, rtol=rtol,
@@ -807,7 +814,8 @@ def _shooting_newton(model, z0, family, config=DEFAULT_CONFIG, chord=False, axes
     )
 
 
-def _shooting_gait(model, x_plus, x_minus, T, iters, res, code, family):
+def _shooting_gait(model, x_plus, x_minus, T, iters, res, code, family, physical):
+    """`physical`: the step's impact was checked (`_step` flags `RESULTS.bad_impact`)."""
     E0 = model.energy(x_plus)
     # Which root of the energy quadratic A d^2 + B d + C (5.13) is this gait's d? The
     # family's root (-B + sign sqrt(disc)) / 2A lies on the side of the vertex -B/2A
@@ -819,7 +827,7 @@ def _shooting_gait(model, x_plus, x_minus, T, iters, res, code, family):
     wrong = (B**2 - 4 * A * C >= 0) & (family_sign(family) * (2 * A * d + B) < 0)
     code = RESULTS.where((code == RESULTS.successful) & wrong, RESULTS.other_cycle, code)
     return _make_gait(
-        model, x_plus, x_minus, T, E0, iters, res, code, _label(family), "shooting"
+        model, x_plus, x_minus, T, E0, iters, res, code, _label(family), "shooting", physical
     )
 
 
