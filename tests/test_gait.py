@@ -161,10 +161,11 @@ def test_chord_finish_gives_the_newton_gaits_and_codes(gaits, method):
     assert np.all(np.isfinite(np.asarray(chord.x_plus)))
 
 
-def test_chord_search_as_two_programs_equals_one_program():
+def test_chord_search_as_two_programs_equals_one_program(monkeypatch):
     """On one device a batch with the chord finish runs as two programs, the Newton loop
     and the chord loop, compiled concurrently (`_compile.compile_pair`): the gaits and
-    codes are bitwise those of the single program, and a second call compiles nothing."""
+    codes are bitwise those of the single program, a second call compiles nothing, and
+    `vj.clear_caches()` drops them."""
     from vhcjax import _compile
 
     guesses = jnp.array([SEED, SEED, (2.5, 8.0), (0.2, 0.0)])
@@ -180,6 +181,13 @@ def test_chord_search_as_two_programs_equals_one_program():
     again = _gait._staged_search(model, guesses, sign, "vhc", axes, True)
     assert len(_compile._pairs) == kept
     np.testing.assert_array_equal(np.asarray(again.x_plus), np.asarray(two.x_plus))
+    # vj.clear_caches() also drops what jax.clear_caches() does not reach (JAX's own caches
+    # left alone here, and the kept programs restored, for the tests that follow).
+    kept_programs, cleared = dict(_compile._pairs), []
+    monkeypatch.setattr(jax, "clear_caches", lambda: cleared.append(True))
+    vj.clear_caches()
+    assert len(_compile._pairs) == 0 and cleared == [True]
+    _compile._pairs.update(kept_programs)
 
 
 def test_chord_steps_keep_the_jacobian():

@@ -11,7 +11,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 from ._compass_gait import CompassGait as CompassGait
-from ._compile import enable_compilation_cache as enable_compilation_cache
+from ._compile import clear_caches as clear_caches, enable_compilation_cache as enable_compilation_cache
 from ._hybrid import (
     DEFAULT_CONFIG as DEFAULT_CONFIG,
     FAST_CONFIG as FAST_CONFIG,

@@ -148,7 +148,9 @@ def compile_pair(key, first, second, args, names=("first", "second")):
 
 
 def clear_caches():
-    """`jax.clear_caches()` and the programs kept by `compile_pair`."""
+    """`jax.clear_caches()`, and the programs vhcjax keeps itself (`compile_pair`: the
+    batched gait searches), which `jax.clear_caches()` does not reach. Frees their memory;
+    the next call compiles again."""
     with _pairs_lock:
         _pairs.clear()
     jax.clear_caches()
