@@ -165,7 +165,7 @@ def test_chord_search_as_two_programs_equals_one_program(monkeypatch):
     """On one device a batch with the chord finish runs as two programs, the Newton loop
     and the chord loop, compiled concurrently (`_compile.compile_pair`): the gaits and
     codes are bitwise those of the single program, a second call compiles nothing, and
-    `vj.clear_caches()` drops them."""
+    `vj.clear_caches()` drops them. Under `jax.jit` the single program is traced."""
     from vhcjax import _compile
 
     guesses = jnp.array([SEED, SEED, (2.5, 8.0), (0.2, 0.0)])
@@ -188,6 +188,12 @@ def test_chord_search_as_two_programs_equals_one_program(monkeypatch):
     vj.clear_caches()
     assert len(_compile._pairs) == 0 and cleared == [True]
     _compile._pairs.update(kept_programs)
+    # Inside a transformation `find_gaits` traces the single program (no two-program cache).
+    psi = model.psi
+    under_jit = jax.jit(lambda p: _gait.find_gaits(vj.CompassGait(), guesses, "stable", psi=p,
+                                                   chord=True).x_plus)(psi)
+    assert len(_compile._pairs) == kept
+    np.testing.assert_allclose(np.asarray(under_jit)[:2], np.asarray(two.x_plus)[:2], atol=1e-12)
 
 
 def test_chord_steps_keep_the_jacobian():

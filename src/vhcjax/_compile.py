@@ -45,7 +45,7 @@ def _choose():
     return dict(CPU_COMPILER_OPTIONS)
 
 
-def _top_level():
+def top_level():
     """True outside any JAX transformation (only a top-level `jax.jit` takes options)."""
     try:
         from jax._src.core import trace_state_clean
@@ -65,7 +65,7 @@ class _Jit:
         functools.update_wrapper(self, fun)
 
     def _get(self):
-        if not _top_level():
+        if not top_level():
             return self._plain
         if self._jitted is None:
             options = compiler_options()

@@ -29,7 +29,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from ._compile import compile_pair, filter_jit, signature
+from ._compile import compile_pair, filter_jit, signature, top_level
 from . import _poincare
 from ._hybrid import DEFAULT_CONFIG, SolverConfig, _step
 from ._results import RESULTS
@@ -1207,7 +1207,7 @@ def _find_chunk(model, guesses, B, P, sign, method, solver, mesh, chord):
     axes = _batched_axes(model)
     if guesses is None:
         gaits = _from_reference_batch(model, sign, method, _HOMOTOPY_STEPS, axes)
-    elif solver == "newton" and device_multiple(mesh) == 1:
+    elif solver == "newton" and device_multiple(mesh) == 1 and top_level():
         gaits = _staged_search(model, pad(guesses), sign, method, axes, bool(chord))
     else:
         gaits = _search_batch(model, pad(guesses), sign, method, solver, axes, bool(chord))
