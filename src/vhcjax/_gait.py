@@ -481,7 +481,9 @@ def _newton_search(kind, config, family, finish, model, x0, axes, chord, stage=N
     `state`: as in `damped_newton_batch` (the `"chord"` stage returns the gaits)."""
     newton["chord_below"] = _CHORD_BELOW if chord else None
     if axes is None:
-        evaluate = lambda x, tol: _evaluate_member(kind, model, x, family, config, tol)  # noqa: E731
+        def evaluate(x, tol):
+            return _evaluate_member(kind, model, x, family, config, tol)
+
         x, r, aux, k = damped_newton(evaluate, x0, **newton)
         return finish(model, x, r, aux, k)
     fn = lambda X, T: _evaluate_batch(kind, config, axes, model, X, T, family)  # noqa: E731
@@ -674,7 +676,8 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
             lambda l: jnp.zeros(l.shape, l.dtype) + jnp.reshape(tie, (B,) + (1,) * (len(l.shape) - 1)).astype(l.dtype), t)
         init = (X0, zeros(R_shape), zeros(J_shape), zeros(aux_shape),
                 tie.astype(int) - 1, tie.astype(int), tie != 0, tie, tie != 0)
-        carry = jax.lax.while_loop(lambda c: jnp.any(iterating(c)), make_body(evaluate, iterating), init)
+        carry = jax.lax.while_loop(lambda c: jnp.any(iterating(c)), make_body(evaluate, iterating),
+                                   init)
     if stage == "newton":
         return carry
     if chord_below is not None:  # the chord loop: the same steps, the residual alone
@@ -1094,7 +1097,8 @@ def _search_stage(model, guesses, sign, method, axes, chord, stage, state=None):
     elif method == "vhc" or guesses.shape[-1] == 3:
         x0 = guesses
     else:
-        x0 = eqx.filter_vmap(lambda m, g: complete_guess(m, g, sign), in_axes=(axes, 0))(model, guesses)
+        complete = lambda m, g: complete_guess(m, g, sign)  # noqa: E731
+        x0 = eqx.filter_vmap(complete, in_axes=(axes, 0))(model, guesses)
     search = _vhc_newton if method == "vhc" else _shooting_newton
     return search(model, x0, sign, chord=chord, axes=axes, stage=stage, state=state)
 
