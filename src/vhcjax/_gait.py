@@ -1155,7 +1155,10 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     chunk per core. Each padded batch is split over the devices of `mesh` (several GPUs,
     or CPU devices with `XLA_FLAGS=--xla_force_host_platform_device_count=N`). Results do
     not depend on the threads; a different split (another program size) changes them by
-    rounding only (3.4e-13 measured), with the same result codes.
+    rounding only (3.4e-13 measured), with the same result codes. On one device each
+    padded batch is compiled as two programs at once, the Newton loop and the rest
+    (`_compile.compile_pair`, kept until `vj.clear_caches()`); inside a JAX
+    transformation, as one.
 
     **Returns:** a `Gait` with a leading batch axis; check `result` per member.
     """
