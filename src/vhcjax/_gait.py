@@ -776,12 +776,7 @@ def shooting_search(
     if axes is not None and solver != "newton":
         return _each_member(shooting_search, model, guess, axes, family, solver=solver,
                             rtol=rtol, atol=atol, max_steps=max_steps, config=config)
-    if guess.shape[-1] == 3:
-        z0 = guess
-    elif axes is None:
-        z0 = complete_guess(model, guess, family)
-    else:
-        z0 = eqx.filter_vmap(lambda m, g: complete_guess(m, g, family), in_axes=(axes, 0))(model, guess)
+    z0 = _section_points(model, guess, family, axes)
     if solver == "newton":
         return _shooting_newton(model, z0, family, config, chord, axes, rtol=rtol, atol=atol,
                                 max_steps=max_steps)
@@ -793,6 +788,17 @@ def shooting_search(
     sr = _step(model, fp.x0, config)
     return _shooting_gait(model, fp.x0, sr.x_minus, fp.periods[0], fp.iterations, fp.residual,
                           fp.result, family, sr.result != RESULTS.bad_impact)
+
+
+def _section_points(model, guess, family, axes=None):
+    """Guesses on the post-impact section: `(a, b, f)` as given, `(a, b)` completed by
+    `complete_guess` (per member when `axes` gives a batch)."""
+    if guess.shape[-1] == 3:
+        return guess
+    if axes is None:
+        return complete_guess(model, guess, family)
+    complete = lambda m, g: complete_guess(m, g, family)  # noqa: E731
+    return eqx.filter_vmap(complete, in_axes=(axes, 0))(model, guess)
 
 
 def _shooting_newton(model, z0, family, config=DEFAULT_CONFIG, chord=False, axes=None,
@@ -1094,11 +1100,10 @@ def _search_stage(model, guesses, sign, method, axes, chord, stage, state=None):
     returns the loop state, `"chord"` the gaits (after the chord loop if `chord`)."""
     if stage == "chord":
         x0 = state[0]  # shapes only
-    elif method == "vhc" or guesses.shape[-1] == 3:
+    elif method == "vhc":
         x0 = guesses
     else:
-        complete = lambda m, g: complete_guess(m, g, sign)  # noqa: E731
-        x0 = eqx.filter_vmap(complete, in_axes=(axes, 0))(model, guesses)
+        x0 = _section_points(model, guesses, sign, axes)
     search = _vhc_newton if method == "vhc" else _shooting_newton
     return search(model, x0, sign, chord=chord, axes=axes, stage=stage, state=state)
 
