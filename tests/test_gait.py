@@ -125,10 +125,16 @@ def test_uphill_solution_is_found_and_flagged():
         _gait.find_gait(m, "stable", guess=(0.20, 1.0), throw=True).a.block_until_ready()
 
 
-def test_batch_equals_unbatched_and_flags_hopeless(gaits):
+@pytest.mark.parametrize("path", ["one_by_one", "vectorised"])
+def test_batch_equals_unbatched_and_flags_hopeless(gaits, monkeypatch, path):
+    """A batch with two hopeless guesses flags them and solves the rest, to the unbatched
+    gaits: by default a batch this small is solved member by member (each gait bitwise a
+    one-member call); with `_ONE_BY_ONE = 0` by the vectorised Newton loop."""
     m = vj.CompassGait()
     guesses = jnp.array([[0.20, -1.0], [0.20, -1.0], [2.5, 8.0], [0.2, 0.0]])
     psi = jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0]))
+    if path == "vectorised":
+        monkeypatch.setattr(_gait, "_ONE_BY_ONE", 0)
     b = _gait.find_gaits(m, guesses, "stable", psi=psi)
     names = vj.result_names(b.result)
     assert names[:2] == ["successful", "successful"]
@@ -136,13 +142,21 @@ def test_batch_equals_unbatched_and_flags_hopeless(gaits):
     np.testing.assert_allclose(np.asarray(b.x_plus[0]), np.asarray(gaits[3.0, "stable", "vhc"].x_plus), atol=1e-12)
     np.testing.assert_allclose(np.asarray(b.x_plus[1]), np.asarray(gaits[2.0, "stable", "vhc"].x_plus), atol=1e-10)
     assert np.all(np.isfinite(np.asarray(b.x_plus)))  # never a silent NaN
+    if path == "one_by_one":
+        assert _gait._one_by_one(4, 1, None) and not _gait._one_by_one(9, 1, None)
+        for i in (1, 3):
+            one = _gait.find_gaits(m, guesses[i:i + 1], "stable", psi=psi[i:i + 1])
+            np.testing.assert_array_equal(np.asarray(b.x_plus[i]), np.asarray(one.x_plus[0]))
+            assert names[i] == vj.result_names(one.result)[0]
 
 
 @pytest.mark.parametrize("method", ["vhc", "shooting"])
-def test_chord_finish_gives_the_newton_gaits_and_codes(gaits, method):
+def test_chord_finish_gives_the_newton_gaits_and_codes(gaits, method, monkeypatch):
     """`chord=True` (the default for batches of 64 or more per device) keeps the Jacobian
     once the residual is small and evaluates the residual alone: same gaits (to the
-    solver tolerance) and the same codes as full Newton, hopeless guesses included."""
+    solver tolerance) and the same codes as full Newton, hopeless guesses included
+    (the vectorised Newton loop: `_ONE_BY_ONE = 0`)."""
+    monkeypatch.setattr(_gait, "_ONE_BY_ONE", 0)
     m = vj.CompassGait()
     seed = SEED if method == "vhc" else tuple(np.asarray(_gait.complete_guess(m, SEED, "stable")))
     hopeless = [(2.5, 8.0), (0.2, 0.0)] if method == "vhc" else [(2.5, 8.0, 1.0), (0.2, 0.0, 0.0)]
@@ -219,7 +233,9 @@ def test_large_batches_run_in_chunks_with_the_same_results(monkeypatch, workers)
     """Batches above `_MAX_CHUNK` run as host-side chunks (a 1,024 batch hung in the XLA
     CPU runtime): with the chunk size set to 2, five members run as 2 + 2 + 1, each padded
     to 2 and then to the bucket of 8 (one compiled program), one chunk at a time or two at
-    once from host threads, and give the unchunked results and codes."""
+    once from host threads, and give the unchunked results and codes (the vectorised
+    Newton loop: `_ONE_BY_ONE = 0`)."""
+    monkeypatch.setattr(_gait, "_ONE_BY_ONE", 0)
     m = vj.CompassGait()
     guesses = jnp.array([[0.20, -1.0], [0.20, -1.0], [2.5, 8.0], [0.2, 0.0], [0.20, -1.0]])
     psi = jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0, 2.5]))

@@ -33,9 +33,10 @@ def test_optax_minimiser_finds_the_newton_gait(newton):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("method, solver", [("vhc", "lm"), ("shooting", "optimistix")])
-def test_other_solvers_in_a_batch(newton, method, solver):
+def test_other_solvers_in_a_batch(newton, method, solver, monkeypatch):
     """A batch with a hopeless guess: the others are solved, to the Newton gait, and the
-    hopeless one is flagged with a finite state."""
+    hopeless one is flagged with a finite state (vectorised: `_ONE_BY_ONE = 0`)."""
+    monkeypatch.setattr(_gait, "_ONE_BY_ONE", 0)
     m = vj.CompassGait()
     seed = SEED if method == "vhc" else tuple(np.asarray(_gait.complete_guess(
         vj.CompassGait(psi=math.radians(3.0)), SEED, "stable")))
