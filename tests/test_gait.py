@@ -125,25 +125,25 @@ def test_uphill_solution_is_found_and_flagged():
         _gait.find_gait(m, "stable", guess=(0.20, 1.0), throw=True).a.block_until_ready()
 
 
-@pytest.mark.parametrize("path", ["one_by_one", "vectorised"])
-def test_batch_equals_unbatched_and_flags_hopeless(gaits, monkeypatch, path):
+@pytest.mark.parametrize("vectorise", [None, True])
+def test_batch_equals_unbatched_and_flags_hopeless(gaits, vectorise):
     """A batch with two hopeless guesses flags them and solves the rest, to the unbatched
     gaits: by default a batch this small is solved member by member (each gait bitwise a
-    one-member call); with `_ONE_BY_ONE = 0` by the vectorised Newton loop."""
+    one-member call); with `vectorise=True` by the vectorised Newton loop."""
     m = vj.CompassGait()
     guesses = jnp.array([[0.20, -1.0], [0.20, -1.0], [2.5, 8.0], [0.2, 0.0]])
     psi = jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0]))
-    if path == "vectorised":
-        monkeypatch.setattr(_gait, "_ONE_BY_ONE", 0)
-    b = _gait.find_gaits(m, guesses, "stable", psi=psi)
+    b = _gait.find_gaits(m, guesses, "stable", psi=psi, vectorise=vectorise)
     names = vj.result_names(b.result)
     assert names[:2] == ["successful", "successful"]
     assert names[2] != "successful" and names[3] != "successful"
     np.testing.assert_allclose(np.asarray(b.x_plus[0]), np.asarray(gaits[3.0, "stable", "vhc"].x_plus), atol=1e-12)
     np.testing.assert_allclose(np.asarray(b.x_plus[1]), np.asarray(gaits[2.0, "stable", "vhc"].x_plus), atol=1e-10)
     assert np.all(np.isfinite(np.asarray(b.x_plus)))  # never a silent NaN
-    if path == "one_by_one":
-        assert _gait._one_by_one(4, 1, None) and not _gait._one_by_one(9, 1, None)
+    if vectorise is None:
+        assert _gait._one_by_one(4, 1, None) and _gait._one_by_one(16, 2, None)
+        assert not _gait._one_by_one(9, 1, None) and not _gait._one_by_one(4, 1, None, True)
+        assert _gait._one_by_one(9, 1, None, False) and not _gait._one_by_one(1, 1, None)
         for i in (1, 3):
             one = _gait.find_gaits(m, guesses[i:i + 1], "stable", psi=psi[i:i + 1])
             np.testing.assert_array_equal(np.asarray(b.x_plus[i]), np.asarray(one.x_plus[0]))
@@ -151,19 +151,18 @@ def test_batch_equals_unbatched_and_flags_hopeless(gaits, monkeypatch, path):
 
 
 @pytest.mark.parametrize("method", ["vhc", "shooting"])
-def test_chord_finish_gives_the_newton_gaits_and_codes(gaits, method, monkeypatch):
+def test_chord_finish_gives_the_newton_gaits_and_codes(gaits, method):
     """`chord=True` (the default for batches of 64 or more per device) keeps the Jacobian
     once the residual is small and evaluates the residual alone: same gaits (to the
     solver tolerance) and the same codes as full Newton, hopeless guesses included
-    (the vectorised Newton loop: `_ONE_BY_ONE = 0`)."""
-    monkeypatch.setattr(_gait, "_ONE_BY_ONE", 0)
+    (in the vectorised Newton loop)."""
     m = vj.CompassGait()
     seed = SEED if method == "vhc" else tuple(np.asarray(_gait.complete_guess(m, SEED, "stable")))
     hopeless = [(2.5, 8.0), (0.2, 0.0)] if method == "vhc" else [(2.5, 8.0, 1.0), (0.2, 0.0, 0.0)]
     guesses = jnp.array([seed, seed] + hopeless)
     psi = jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0]))
-    full = _gait.find_gaits(m, guesses, "stable", method, psi=psi, chord=False)
-    chord = _gait.find_gaits(m, guesses, "stable", method, psi=psi, chord=True)
+    full = _gait.find_gaits(m, guesses, "stable", method, psi=psi, chord=False, vectorise=True)
+    chord = _gait.find_gaits(m, guesses, "stable", method, psi=psi, chord=True, vectorise=True)
     assert vj.result_names(chord.result) == vj.result_names(full.result)
     assert vj.result_names(chord.result)[:2] == ["successful", "successful"]
     ok = np.asarray(full.result == vj.RESULTS.successful)
@@ -234,15 +233,14 @@ def test_large_batches_run_in_chunks_with_the_same_results(monkeypatch, workers)
     CPU runtime): with the chunk size set to 2, five members run as 2 + 2 + 1, each padded
     to 2 and then to the bucket of 8 (one compiled program), one chunk at a time or two at
     once from host threads, and give the unchunked results and codes (the vectorised
-    Newton loop: `_ONE_BY_ONE = 0`)."""
-    monkeypatch.setattr(_gait, "_ONE_BY_ONE", 0)
+    Newton loop)."""
     m = vj.CompassGait()
     guesses = jnp.array([[0.20, -1.0], [0.20, -1.0], [2.5, 8.0], [0.2, 0.0], [0.20, -1.0]])
     psi = jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0, 2.5]))
-    whole = _gait.find_gaits(m, guesses, "stable", psi=psi)
+    whole = _gait.find_gaits(m, guesses, "stable", psi=psi, vectorise=True)
     monkeypatch.setattr(_gait, "_MAX_CHUNK", 2)
     monkeypatch.setenv("VHCJAX_HOST_WORKERS", workers)
-    chunked = _gait.find_gaits(m, guesses, "stable", psi=psi)
+    chunked = _gait.find_gaits(m, guesses, "stable", psi=psi, vectorise=True)
     assert vj.result_names(chunked.result) == vj.result_names(whole.result)
     assert chunked.x_plus.shape == whole.x_plus.shape == (5, 4)
     np.testing.assert_allclose(np.asarray(chunked.x_plus), np.asarray(whole.x_plus), rtol=1e-12, atol=1e-14)

@@ -33,16 +33,16 @@ def test_optax_minimiser_finds_the_newton_gait(newton):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("method, solver", [("vhc", "lm"), ("shooting", "optimistix")])
-def test_other_solvers_in_a_batch(newton, method, solver, monkeypatch):
+def test_other_solvers_in_a_batch(newton, method, solver):
     """A batch with a hopeless guess: the others are solved, to the Newton gait, and the
-    hopeless one is flagged with a finite state (vectorised: `_ONE_BY_ONE = 0`)."""
-    monkeypatch.setattr(_gait, "_ONE_BY_ONE", 0)
+    hopeless one is flagged with a finite state (`vmap` over the members)."""
     m = vj.CompassGait()
     seed = SEED if method == "vhc" else tuple(np.asarray(_gait.complete_guess(
         vj.CompassGait(psi=math.radians(3.0)), SEED, "stable")))
     hopeless = (2.5, 8.0) if method == "vhc" else (2.5, 8.0, 1.0)
     g = _gait.find_gaits(m, jnp.array([seed, seed, hopeless]), "stable", method,
-                         psi=jnp.radians(jnp.array([3.0, 2.5, 3.0])), solver=solver)
+                         psi=jnp.radians(jnp.array([3.0, 2.5, 3.0])), solver=solver,
+                         vectorise=True)
     names = vj.result_names(g.result)
     assert names[:2] == ["successful", "successful"] and names[2] != "successful"
     np.testing.assert_allclose(np.asarray(g.x_plus[0]), np.asarray(newton[method].x_plus), atol=1e-10)

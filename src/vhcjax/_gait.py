@@ -1051,8 +1051,8 @@ _MIN_SPLIT = 8
 # any JAX transformation) are solved one member at a time by the one-member program,
 # from the host workers. Measured at B = 10 on the 2-core CPU: it compiles in 3.6-3.7 s
 # against 4.6-5.0 s (VHC) and 5.5-5.6 s (shooting) for the batched program, and runs
-# 1.7-1.9x slower (0.03 s more for ten gaits): a small batch is done sooner unless the
-# same call is repeated some 50 (VHC) to 150 (shooting) times.
+# 1.6-1.9x slower (0.01-0.03 s more for ten gaits): a small batch is done sooner unless
+# the same call is repeated some 50 (VHC) to 150 (shooting) times (`vectorise=True`).
 _ONE_BY_ONE = 8
 assert _MAX_CHUNK <= MAX_DISPATCH
 
@@ -1083,9 +1083,12 @@ def _chunk_size(B, workers, mesh):
     return chunk
 
 
-def _one_by_one(B, workers, mesh):
-    """Whether a guessed batch of `B` is solved member by member (see `_ONE_BY_ONE`)."""
-    return 1 < B <= _ONE_BY_ONE * workers and device_multiple(mesh) == 1 and top_level()
+def _one_by_one(B, workers, mesh, vectorise=None):
+    """Whether a guessed batch of `B` is solved member by member (`find_gaits`'s
+    `vectorise`; `None`: up to `_ONE_BY_ONE` members per host worker)."""
+    if vectorise is None:
+        vectorise = B > _ONE_BY_ONE * workers
+    return B > 1 and not vectorise and device_multiple(mesh) == 1 and top_level()
 
 
 def _batched_axes(model):
@@ -1146,7 +1149,7 @@ def _from_reference_batch(model, sign, method, num, axes):
 
 
 def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, solver="newton",
-               mesh=None, chord=None):
+               mesh=None, chord=None, vectorise=None):
     """Batched `find_gait` over guesses, slopes and model parameters (one Newton loop over
     the batch; other solvers by `vmap`), never raises.
 
@@ -1163,12 +1166,17 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
       (latency, where compile time dominates) compile one evaluation fewer. It pays off
       after about 7,000 (VHC) / 9,000 (shooting) gaits per session on a 2-core CPU: a
       one-off batch smaller than that finishes sooner with `chord=False`.
+    - `vectorise`: with `guesses`, on one device and outside JAX transformations: `True`
+      solves the batch as one vectorised Newton loop, `False` one member at a time by
+      the one-member program (below). `None` (default): one member at a time for at most
+      8 members per core, vectorised above.
 
     A small batch with guesses (at most 8 members per core, on one device) is solved one
     member at a time by the program of a batch of one, from a thread per core: for ten
-    gaits on a 2-core CPU it compiles in 3.6 s instead of 4.6-5.5 s and runs 0.03 s
-    longer, and each gait is bitwise that of a one-member call. Larger batches run as one
-    vectorised Newton loop:
+    gaits on a 2-core CPU it compiles in 3.6 s instead of 4.6-5.5 s and runs 0.01-0.03 s
+    longer, and each gait is bitwise that of a one-member call. The vectorised loop pays
+    off where the same small batch is solved some 50 (VHC) to 150 (shooting) times
+    (`vectorise=True`). Larger batches run as one vectorised Newton loop:
 
     Batches are padded to a few bucket sizes per device (1, 8, 16, 32, 64, 128) with copies of
     the first member, so that new sizes rarely recompile; larger batches run in chunks of
@@ -1197,7 +1205,7 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     B = max(sizes)
     workers = host_workers(mesh)
     chunk = _chunk_size(B, workers, mesh)
-    if guesses is not None and _one_by_one(B, workers, mesh):
+    if guesses is not None and _one_by_one(B, workers, mesh, vectorise):
         chunk = 1
     if chord is None:  # members per device of one dispatch (every chunk: one program)
         chord = _padded_size(min(B, chunk), mesh) // device_multiple(mesh) >= _CHORD_MIN_MEMBERS
