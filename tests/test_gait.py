@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax import _gait
+from vhcjax import _gait, _vhc
 
 SEED = (0.20, -1.0)  # thesis (7.2)
 SLOPES_DEG = (2.0, 3.0, 4.0)
@@ -207,6 +207,41 @@ def test_chord_search_as_two_programs_equals_one_program(monkeypatch):
                                                    chord=True).x_plus)(psi)
     assert len(_compile._pairs) == kept
     np.testing.assert_allclose(np.asarray(under_jit)[:2], np.asarray(two.x_plus)[:2], atol=1e-12)
+
+
+def test_newton_stops_a_member_that_cannot_move():
+    """Where the residual is undefined (a constant, so J = 0) neither the Newton step nor
+    a damped one exists: the member stops after those two trials (three evaluations with
+    the guess's) instead of re-evaluating the same point `max_trials` times, which in a
+    batch made every member wait. A member that can move is not affected."""
+    calls = []
+
+    def fn(x):
+        jax.debug.callback(lambda: calls.append(1))
+        return jnp.full_like(x, 1e3), None
+
+    x0 = jnp.array([0.2, -1.0])
+    x, r, _, k = _gait.damped_newton(fn, x0)
+    assert len(calls) == 3 and int(k) == 0
+    np.testing.assert_array_equal(np.asarray(x), np.asarray(x0))
+    calls.clear()
+    x, r, _, k = _gait.damped_newton(lambda y: (y**2 - jnp.array([2.0, 3.0]), None), jnp.array([1.4, 1.7]))
+    np.testing.assert_allclose(np.asarray(x), np.sqrt([2.0, 3.0]), rtol=1e-12)
+
+
+def test_phi_field_stops_where_the_ode_is_singular():
+    """`_phi_field` returns zero rates and a flag rate of 1 where $\\dot\\theta^2 \\le 0$ (no
+    NaN: the integration finishes in a few steps and the member is flagged); elsewhere
+    the rates of (5.19) and no flag."""
+    m = vj.CompassGait()
+    ref = _gait.find_gait(m, "stable", guess=SEED)
+    y = jnp.array([float(ref.e), float(ref.f / ref.b), 0.0, 0.0])
+    args = (m, ref.E0, jnp.sign(ref.b))
+    rate = _gait._phi_field(ref.a, y, args)
+    ddphi, _, dth2, _ = _vhc.phi_second_derivative(m, ref.E0, ref.a, y[0:1], y[1:2])
+    np.testing.assert_allclose(np.asarray(rate), [y[1], ddphi[0], -1 / np.sqrt(dth2), 0.0], rtol=1e-14)
+    low = _gait._phi_field(ref.a, y, (m, ref.E0 - 100.0, jnp.sign(ref.b)))  # below the potential
+    assert np.asarray(low).tolist() == [0.0, 0.0, 0.0, 1.0]
 
 
 def test_chord_steps_keep_the_jacobian():

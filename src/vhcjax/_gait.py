@@ -235,10 +235,23 @@ class BoundaryData(eqx.Module):
 
 
 def _phi_field(theta, y, args):
+    """$(\\phi', \\phi'', dt/d\\theta)$ (5.19; $dt/d\\theta = \\pm 1/\\sqrt{\\dot\\theta^2}$) and
+    a fourth rate, 1 where the ODE is singular ($\\dot\\theta^2 \\le 0$ or a non-finite
+    rate), where the others are 0: the state stops there, the integration finishes in a
+    few steps instead of shrinking its steps to the step limit (which, in a batch, every
+    member would wait for), and `y[3] > 0` flags it."""
     model, E0, sign = args
     phi, dphi = y[0:1], y[1:2]
     ddphi, _, dth2, _ = phi_second_derivative(model, E0, theta, phi, dphi)
-    return jnp.concatenate([dphi, ddphi, (sign / jnp.sqrt(dth2))[None]])
+    rate = jnp.concatenate([dphi, ddphi, (sign / jnp.sqrt(jnp.where(dth2 > 0, dth2, 1.0)))[None]])
+    ok = (dth2 > 0) & jnp.isfinite(rate).all()
+    return jnp.concatenate([jnp.where(ok, rate, 0.0), jnp.where(ok, 0.0, 1.0)[None]])
+
+
+def _phi_error_norm(e):
+    """The step-size controller's norm: the RMS of the first three components (the
+    singularity flag of `_phi_field` is no part of the solution's error)."""
+    return optx.rms_norm(e[:3])
 
 
 def _phi_field_unit(s, y, args):
@@ -247,7 +260,8 @@ def _phi_field_unit(s, y, args):
     callback, which would keep the compiled program out of JAX's persistent cache).
     The steps and error estimates are those of the integration over $\\theta$."""
     a, span, field_args = args
-    return span * _phi_field(a + s * span, y, field_args)
+    rate = _phi_field(a + s * span, y, field_args)
+    return jnp.concatenate([span * rate[:3], rate[3:]])  # the flag counts in s
 
 
 # diffrax traces the field several times; jitted, the later traces reuse the first jaxpr.
@@ -285,9 +299,9 @@ def _boundary_abd(model, data, a, b, d, real, config):
     e, f = x_plus[1], x_plus[n + 1]
     c, g, h = x_minus[0], x_minus[1], x_minus[n + 1]
     # phi'(a) = f/b; M_theta > 0 and theta_dot^2 > 0 at both ends, else singular.
-    y0 = jnp.stack([e, f / b, 0.0])
+    y0 = jnp.stack([e, f / b, 0.0, 0.0])
     ok0 = jnp.isfinite(y0).all()
-    y0 = jnp.where(ok0, y0, jnp.array([e, 0.0, 0.0]))
+    y0 = jnp.where(ok0, y0, jnp.array([e, 0.0, 0.0, 0.0]))
     sign = jnp.sign(b)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(_phi_field_unit_jit),
@@ -296,8 +310,11 @@ def _boundary_abd(model, data, a, b, d, real, config):
         t1=1.0,
         dt0=1.0 / 64,
         y0=y0,
-        args=(a, c - a, (model, E0, sign)),
-        stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
+        # A member already singular at the start gets an empty interval (a few steps).
+        args=(a, jnp.where(ok0 & real & (b != 0) & (d != 0), c - a, 0.0), (model, E0, sign)),
+        stepsize_controller=diffrax.PIDController(
+            rtol=config.rtol, atol=config.atol, norm=_phi_error_norm
+        ),
         saveat=diffrax.SaveAt(t1=True),
         max_steps=config.max_steps,
         adjoint=diffrax.ForwardMode(),
@@ -314,6 +331,7 @@ def _boundary_abd(model, data, a, b, d, real, config):
         ~ok0
         | (sol.result != diffrax.RESULTS.successful)
         | ~jnp.isfinite(yc).all()
+        | (yc[3] > 0)  # the ODE went singular on the way (`_phi_field`)
         | ~jnp.isfinite(residual).all()
         | (dth2_a <= 0)
         | (dth2_c <= 0)
@@ -642,6 +660,10 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
             dX = solve(where(newton, J, JtJ + lam[:, None, None] * eye),
                        where(newton, R, (Jt @ R[..., None])[..., 0]))
             dX = where(jnp.isfinite(dX).all(-1) & ~first, dX, jnp.zeros_like(dX))
+            # A damped trial with no step ($J^Tr = 0$, or no finite solution, e.g. J = 0
+            # where the residual is undefined): the member cannot move, so it stops as
+            # after `max_trials` failures instead of re-evaluating the same point.
+            stuck = ~first & ~newton & ~(norm(dX) > 0)
             tol = trial_tolerance(R, first)
             R_t, J_t, aux_t = evaluate(X - dX, tol, J)
             improved = first | (
@@ -661,7 +683,7 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
             # After a failure: grow lambda from a scale of J^T J; after a success: Newton again.
             lam_start = 1e-3 * norm(jnp.diagonal(JtJ, axis1=-2, axis2=-1))
             lam_new = jnp.where(improved, 0.0, jnp.where(newton, lam_start, 10.0 * lam))
-            trials_new = jnp.where(improved, 0, trials + 1)
+            trials_new = jnp.where(improved, 0, jnp.where(stuck, max_trials, trials + 1))
             new = (X_new, R_new, J_new, aux_new, k + improved, trials_new, done_new, lam_new,
                    chord_new)
             return pick(active(carry), new, carry)  # stopped members keep their state
