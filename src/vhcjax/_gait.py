@@ -311,6 +311,7 @@ def _boundary_abd(model, data, a, b, d, real, config):
     ok0 = jnp.isfinite(y0).all()
     y0 = jnp.where(ok0, y0, jnp.array([e, 0.0, 0.0, 0.0]))
     sign = jnp.sign(b)
+    regular_start = ok0 & (b != 0) & (d != 0)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(_phi_field_unit_jit),
         _solver(config.solver),
@@ -319,7 +320,7 @@ def _boundary_abd(model, data, a, b, d, real, config):
         dt0=1.0 / 64,
         y0=y0,
         # A member already singular at the start gets an empty interval (a few steps).
-        args=(a, jnp.where(ok0 & real & (b != 0) & (d != 0), c - a, 0.0), (model, E0, sign)),
+        args=(a, jnp.where(regular_start & real, c - a, 0.0), (model, E0, sign)),
         stepsize_controller=diffrax.PIDController(
             rtol=config.rtol, atol=config.atol, norm=_phi_error_norm,
             dtmin=_PHI_DTMIN,
@@ -337,7 +338,7 @@ def _boundary_abd(model, data, a, b, d, real, config):
     dth2_a, dth2_c, det_a, det_c = dth2[0], dth2[1], det[0], det[1]
     residual = jnp.stack([yc[0] - g, yc[1] - h / d])
     singular = (
-        ~ok0
+        ~regular_start
         | (sol.result != diffrax.RESULTS.successful)
         | ~jnp.isfinite(yc).all()
         | (yc[3] > 0)  # the ODE went singular on the way (`_phi_field`)
@@ -346,8 +347,6 @@ def _boundary_abd(model, data, a, b, d, real, config):
         | (dth2_c <= 0)
         | (jnp.abs(det_a) < 1e-12)
         | (jnp.abs(det_c) < 1e-12)
-        | (b == 0)
-        | (d == 0)
     )
     code = RESULTS.where(
         ~real, RESULTS.no_real_root, RESULTS.where(singular, RESULTS.singular_phi_ode, RESULTS.successful)
@@ -542,7 +541,8 @@ def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10
     linearisation. From the last accepted point the full Newton step ($\lambda = 0$) is
     tried first; a step that does not decrease $\|r\|_2$ is retried from the same point
     with $(J^TJ + \lambda I)\Delta x = J^Tr$ and growing $\lambda$ (no new Jacobian), up
-    to `max_trials` times. Near a solution this is plain Newton (quadratic convergence);
+    to `max_trials` times (at once, where the damped step is zero or not finite: then
+    no step exists). Near a solution this is plain Newton (quadratic convergence);
     far from it the damped steps turn toward steepest descent, which lets the VHC search
     leave the edge of the region where (5.13) has real roots (plain Newton stalls there
     from the thesis seed (7.2) for the unstable family).
