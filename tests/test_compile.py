@@ -16,11 +16,14 @@ def _f(x, scale):
 
 def test_options_on_cpu_and_opt_out(monkeypatch):
     opts = _compile.compiler_options()
+    background = _compile.compiler_options(background=True)
     if jax.default_backend() == "cpu":
-        # Either this XLA knows the option (it is used) or the probe turned it off.
+        # Either this XLA knows the options (they are used) or the probe turned them off.
         assert opts in (None, _compile.CPU_COMPILER_OPTIONS)
+        both = {**_compile.CPU_COMPILER_OPTIONS, **_compile.CPU_BACKGROUND_OPTIONS}
+        assert background in (opts, both)
     monkeypatch.setenv("VHCJAX_XLA_OPTIONS", "0")
-    assert _compile._choose() is None
+    assert _compile._choose() == (None, None)
 
 
 def test_top_level_nested_and_vmapped_calls_agree_with_eqx_filter_jit():

@@ -514,7 +514,7 @@ def _newton_search(kind, config, family, finish, model, x0, axes, chord, stage=N
         return finish(model, x, r, aux, k)
     fn = lambda X, T: _evaluate_batch(kind, config, axes, model, X, T, family)  # noqa: E731
     out = damped_newton_batch(fn, x0, stage=stage, state=state, **newton)
-    if stage == "newton":
+    if stage in ("newton", "init"):
         return out
     X, R, aux, k = out
     return eqx.filter_vmap(finish, in_axes=(axes, 0, 0, 0, 0))(model, X, R, aux, k)
@@ -610,7 +610,9 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
 
     `stage` splits the two loops into two programs (compiled concurrently by
     `_compile.compile_pair`): `"newton"` returns the loop state after the Newton loop,
-    `"chord"` runs the chord loop from that `state` (`X0` then only gives shapes).
+    `"chord"` runs the chord loop from that `state` (`X0` then only gives shapes), and
+    `"init"` returns the loop's initial state, which has the shapes of `"newton"`'s and
+    needs only the residual traced (not its forward mode).
 
     **Returns:** `(X, R, aux, iterations)`, each with the leading batch axis.
     """
@@ -630,7 +632,7 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
     def evaluate_traced(X, tol):
         return batch_jacobian(lambda Y: residual_jaxpr(Y, tol, *rconsts), X)
 
-    if stage != "chord":  # the chord stage has no forward-mode evaluation to trace
+    if stage not in ("chord", "init"):  # those have no forward-mode evaluation to trace
         evaluate_jaxpr, consts = jax.closure_convert(evaluate_traced, X0, tol0)
         evaluate = lambda X, tol, J: evaluate_jaxpr(X, tol, *consts)  # noqa: E731
 
@@ -702,11 +704,15 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
     if stage == "chord":
         carry = state
     else:
-        R_shape, J_shape, aux_shape = jax.eval_shape(evaluate, X0, tol0, None)
+        # Shapes from the residual alone: `J[i] = dR[i]/dX[i]` (`batch_jacobian`).
+        R_shape, aux_shape = jax.eval_shape(lambda X, tol: residual_jaxpr(X, tol, *rconsts), X0, tol0)
+        J_shape = jax.ShapeDtypeStruct(R_shape.shape + (n,), R_shape.dtype)
         zeros = lambda t: jax.tree_util.tree_map(  # noqa: E731
             lambda l: jnp.zeros(l.shape, l.dtype) + jnp.reshape(tie, (B,) + (1,) * (len(l.shape) - 1)).astype(l.dtype), t)
         init = (X0, zeros(R_shape), zeros(J_shape), zeros(aux_shape),
                 tie.astype(int) - 1, tie.astype(int), tie != 0, tie, tie != 0)
+        if stage == "init":
+            return init
         carry = jax.lax.while_loop(lambda c: jnp.any(iterating(c)), make_body(evaluate, iterating),
                                    init)
     if stage == "newton":
@@ -1143,7 +1149,8 @@ def _search_one(model, guesses, sign, method, solver, chord):
 
 def _search_stage(model, guesses, sign, method, axes, chord, stage, state=None):
     """One `stage` of the batched Newton search (see `damped_newton_batch`): `"newton"`
-    returns the loop state, `"chord"` the gaits (after the chord loop if `chord`)."""
+    returns the loop state, `"chord"` the gaits (after the chord loop if `chord`),
+    `"init"` the initial loop state (for its shapes)."""
     if stage == "chord":
         x0 = state[0]  # shapes only
     elif method == "vhc":
@@ -1157,12 +1164,15 @@ def _search_stage(model, guesses, sign, method, axes, chord, stage, state=None):
 def _staged_search(model, guesses, sign, method, axes, chord):
     """`_search_batch` (one device) as two programs compiled concurrently
     (`_compile.compile_pair`): the Newton loop, then the chord loop (with `chord`) and
-    the assembly of the gaits."""
+    the assembly of the gaits. The second is compiled in the background from the loop
+    state's shapes (`"init"`: the residual traced, not yet its forward mode) while the
+    Newton loop is traced and compiled."""
     first, second = compile_pair(
         ("search", method, chord, signature((model, guesses, sign))),
         lambda m, g, s: _search_stage(m, g, s, method, axes, chord, "newton"),
         lambda m, g, s, state: _search_stage(m, g, s, method, axes, chord, "chord", state),
         (model, guesses, sign),
+        state_shapes=lambda m, g, s: _search_stage(m, g, s, method, axes, chord, "init"),
         names=("search_newton_loop", "search_chord_loop_and_gaits"),
     )
     return second(model, guesses, sign, first(model, guesses, sign))
