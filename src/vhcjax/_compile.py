@@ -28,8 +28,8 @@ CPU_COMPILER_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 #: Added for a program that `compile_pair` compiles in the background while this thread
 #: traces the other: its LLVM code generation on one thread, leaving the other cores to
 #: the tracing and to the other program's compile. Measured (batched gait searches,
-#: B = 256, fresh processes, six runs each): compile 5.1-5.4 s instead of 5.3-5.8 s
-#: (VHC), 6.2-6.5 s instead of 6.7-7.2 s (shooting) against the same order without it.
+#: B = 256, fresh processes; six runs with it, three without): compile 5.1-5.4 s instead
+#: of 5.4-5.8 s (VHC), 6.2-6.5 s instead of 6.7-7.2 s (shooting), in the same order.
 CPU_BACKGROUND_OPTIONS = {"xla_cpu_parallel_codegen_split_count": 1}
 
 _chosen = []
