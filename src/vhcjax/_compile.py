@@ -113,24 +113,22 @@ def signature(tree):
     )
 
 
-def compile_pair(key, first, second, args, names=("first", "second"), state_shapes=None):
+def compile_pair(key, first, second, state_shapes, args, names=("first", "second")):
     """Two programs that run one after the other, `state = first(*args)` and then
-    `second(*args, state)`, compiled concurrently: XLA compiles one on another thread (it
-    releases the interpreter lock) while this thread traces and compiles the other. Kept
-    by `key`, which must hold everything the two programs depend on besides the arrays
-    of `args` (e.g. `signature(args)`); `clear_caches` forgets them.
+    `second(*args, state)`, compiled concurrently: XLA compiles `second` on another
+    thread (it releases the interpreter lock), with its code generation on one thread
+    (`CPU_BACKGROUND_OPTIONS`), while this thread traces and compiles `first`. Kept by
+    `key`, which must hold everything the two programs depend on besides the arrays of
+    `args` (e.g. `signature(args)`); `clear_caches` forgets them.
 
     XLA's time grows faster than the size of a program: two halves compile in less time
     than the whole, even one after the other, and on two cores they overlap.
 
     `state_shapes`: a function of `args` whose output has the shapes and dtypes of
-    `first`'s, cheaper to trace than `first` (`jax.eval_shape` traces it). Without it
-    `first` is traced first and compiled in the background while `second` is traced;
-    with it `second` goes to the background first, with its code generation on one
-    thread (`CPU_BACKGROUND_OPTIONS`), and `first` is traced and compiled meanwhile. The
-    batched gait searches use this: `second` (the chord loop) needs only the residual,
-    which `first` (the Newton loop) traces anyway before differentiating it, so the
-    second core compiles the chord loop while the Newton loop's forward mode is traced.
+    `first`'s, cheaper to trace than `first` (`jax.eval_shape` traces it). The batched
+    gait searches: `second` (the chord loop) needs only the residual, which `first` (the
+    Newton loop) traces anyway before differentiating it, so the second core compiles
+    the chord loop while the Newton loop's forward mode is traced.
 
     `names`: of the two programs (as JAX and its disk cache show them).
 
@@ -141,28 +139,23 @@ def compile_pair(key, first, second, args, names=("first", "second"), state_shap
         if key not in _pairs:
             dynamic, static = eqx.partition(args, eqx.is_array)
 
-            def jit(fn, name, background=False):
-                def program(*a):
-                    return fn(*eqx.combine(a[: len(args)], static), *a[len(args):])
+            def with_static(fn):
+                return lambda *a: fn(*eqx.combine(a[: len(args)], static), *a[len(args):])
 
+            def jit(fn, name, background=False):
+                program = with_static(fn)
                 program.__name__ = program.__qualname__ = name  # names the disk-cache entry
                 return jax.jit(program, compiler_options=compiler_options(background))
 
-            def shapes(tree):
-                return jax.tree_util.tree_map(lambda o: jax.ShapeDtypeStruct(o.shape, o.dtype), tree)
-
+            state = jax.tree_util.tree_map(
+                lambda o: jax.ShapeDtypeStruct(o.shape, o.dtype),
+                jax.eval_shape(with_static(state_shapes), *dynamic),
+            )
+            lowered = jit(second, names[1], background=True).trace(*dynamic, state).lower()
             with ThreadPoolExecutor(1) as pool:
-                if state_shapes is None:
-                    lowered = jit(first, names[0]).trace(*dynamic).lower()
-                    compiling = pool.submit(lowered.compile)
-                    second_lowered = jit(second, names[1]).trace(*dynamic, shapes(lowered.out_info))
-                    _pairs[key] = (compiling.result(), second_lowered.lower().compile())
-                else:
-                    state = shapes(jax.eval_shape(jit(state_shapes, names[1] + "_state"), *dynamic))
-                    lowered = jit(second, names[1], background=True).trace(*dynamic, state).lower()
-                    compiling = pool.submit(lowered.compile)
-                    first_compiled = jit(first, names[0]).trace(*dynamic).lower().compile()
-                    _pairs[key] = (first_compiled, compiling.result())
+                compiling = pool.submit(lowered.compile)
+                first_compiled = jit(first, names[0]).trace(*dynamic).lower().compile()
+                _pairs[key] = (first_compiled, compiling.result())
         first_compiled, second_compiled = _pairs[key]
 
     def run_first(*a):

@@ -1171,8 +1171,8 @@ def _staged_search(model, guesses, sign, method, axes, chord):
         ("search", method, chord, signature((model, guesses, sign))),
         lambda m, g, s: _search_stage(m, g, s, method, axes, chord, "newton"),
         lambda m, g, s, state: _search_stage(m, g, s, method, axes, chord, "chord", state),
+        lambda m, g, s: _search_stage(m, g, s, method, axes, chord, "init"),
         (model, guesses, sign),
-        state_shapes=lambda m, g, s: _search_stage(m, g, s, method, axes, chord, "init"),
         names=("search_newton_loop", "search_chord_loop_and_gaits"),
     )
     return second(model, guesses, sign, first(model, guesses, sign))
