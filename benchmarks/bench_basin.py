@@ -62,9 +62,9 @@ def main(argv=None):
     import jax.numpy as jnp
 
     import vhcjax as vj
-    from vhcjax._basin import _recover_chunk
-    from vhcjax._hybrid import SolverConfig
-    from vhcjax._poincare import fixed_point
+    from vhcjax.robustness._basin import _recover_chunk
+    from vhcjax.hybrid._simulate import SolverConfig
+    from vhcjax.hybrid._poincare import fixed_point
 
     model = vj.CompassGait()
     fp = eqx.filter_jit(fixed_point)(model, jnp.asarray(SEED))

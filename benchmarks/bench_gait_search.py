@@ -53,8 +53,8 @@ def main(argv=None):
     import jax.numpy as jnp
 
     import vhcjax as vj
-    from vhcjax import _compile, _gait
-
+    from vhcjax import _compile
+    from vhcjax.gait import _search as _gait
     sizes = [int(s) for s in args.sizes.split(",")]
     pool = None
     if args.scipy_procs > 1:  # started (and scipy imported) before any timing

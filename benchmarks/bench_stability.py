@@ -2,7 +2,7 @@
 transverse linearization and the autodiff Poincare Jacobian) against scipy (central finite
 differences of a `solve_ivp` step map, one slope after another).
 
-The gaits (fixed points) are computed first by `vhcjax._stability.period1_family` and are
+The gaits (fixed points) are computed first by `vhcjax.stability._multipliers.period1_family` and are
 not timed. vhcjax: `family_multipliers` on all B slopes at once (vmap), compile time
 reported separately from the run time (best of `--repeats`). scipy: for each of a subset
 of the slopes (`--scipy-slopes`), the 3x3 Jacobian of the step map by central differences
@@ -61,8 +61,7 @@ def main(argv=None):
     import jax.numpy as jnp
 
     from vhcjax import CompassGait
-    from vhcjax import _stability as S
-
+    from vhcjax.stability import _multipliers as S
     psis = np.radians(np.linspace(args.lo, args.hi, args.slopes))
     t0 = time.perf_counter()
     fam = S.period1_family(psis, "stable")

@@ -8,10 +8,10 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from vhcjax import _poincare as P
-from vhcjax._basin import basin_slice
-from vhcjax._kneed_walker import KneedWalker
-from vhcjax._recovery import CONVERGED
+from vhcjax.hybrid import _poincare as P
+from vhcjax.robustness._basin import basin_slice
+from vhcjax.models._kneed_walker import KneedWalker
+from vhcjax.robustness._recovery import CONVERGED
 
 
 def main(n=21):

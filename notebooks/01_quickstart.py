@@ -61,7 +61,7 @@ for name in np.unique(names):
 
 # %%
 try:
-    from vhcjax import _plotting as plotting
+    from vhcjax.plotting import _simulation as plotting
 except ImportError:  # plotting module not available in this build
     plotting = None
 if plotting is not None:

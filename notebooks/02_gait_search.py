@@ -105,7 +105,7 @@ for f, gg in fams.items():
     print(f"{f} family: {ok.sum()} of {n} slopes; T from {T.min():.4f} to {T.max():.4f} s")
 
 # %%
-from vhcjax._plot_gait import plot_sweep  # noqa: E402
+from vhcjax.plotting._gait import plot_sweep  # noqa: E402
 
 os.makedirs("notebook_out", exist_ok=True)
 sweeps = {f: vj.Sweep(jnp.radians(sl), gg, jnp.zeros((n, 3))) for f, gg in fams.items()}

@@ -24,8 +24,8 @@ import os
 import numpy as np
 
 import vhcjax as vj
-from vhcjax import _stability as S
-from vhcjax._plot_stability import plot_bifurcation, plot_multipliers_complex
+from vhcjax.stability import _multipliers as S
+from vhcjax.plotting._stability import plot_bifurcation, plot_multipliers_complex
 
 FULL = os.environ.get("VHCJAX_FULL") == "1"
 os.makedirs("notebook_out", exist_ok=True)

@@ -25,8 +25,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import vhcjax as vj
-from vhcjax._plot_robustness import plot_basin, plot_push, plot_slope
-from vhcjax._push import max_push, push_sensitivity_autodiff
+from vhcjax.plotting._robustness import plot_basin, plot_push, plot_slope
+from vhcjax.robustness._push import max_push, push_sensitivity_autodiff
 
 FULL = os.environ.get("VHCJAX_FULL") == "1"
 os.makedirs("notebook_out", exist_ok=True)

@@ -27,8 +27,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import vhcjax as vj
-from vhcjax import _poincare as P
-
+from vhcjax.hybrid import _poincare as P
 FULL = os.environ.get("VHCJAX_FULL") == "1"
 
 
@@ -114,8 +113,8 @@ Jfd = np.stack([(step_jit(model, fp.z + h * e) - step_jit(model, fp.z - h * e)) 
 ev = np.linalg.eigvals(np.asarray(J))
 print("multipliers (jacfwd):", ev, "| max |J - J_fd|:", np.abs(np.asarray(J) - Jfd).max())
 
-from vhcjax._transverse import transverse_linearization  # noqa: E402
-from vhcjax._vhc_search import vhc_orbit  # noqa: E402
+from vhcjax.stability._transverse import transverse_linearization  # noqa: E402
+from vhcjax.gait._vhc_n import vhc_orbit  # noqa: E402
 
 orb = eqx.filter_jit(vhc_orbit)(model, fp.z)
 tl = eqx.filter_jit(transverse_linearization)(model, fp.x0, orb.x_minus, fp.periods[0])
@@ -129,7 +128,7 @@ assert np.abs(ev_sorted(tl.multipliers) - ev_sorted(ev)).max() < 1e-6
 # ## A basin slice (section coordinates q1, dq1)
 
 # %%
-from vhcjax._basin import basin_slice  # noqa: E402
+from vhcjax.robustness._basin import basin_slice  # noqa: E402
 
 n = 41 if FULL else 5
 bs = basin_slice(model, fp.z, axes=(0, 1), half_widths=(0.02, 0.1), shape=(n, n), num_steps=40)

@@ -8,9 +8,8 @@ import jax.numpy as jnp
 import numpy as np
 
 import vhcjax as vj
-from vhcjax._hybrid import DEFAULT_CONFIG, simulate_jit
-from vhcjax import _poincare
-
+from vhcjax.hybrid._simulate import DEFAULT_CONFIG, simulate_jit
+from vhcjax.hybrid import _poincare as _poincare
 SEED = (0.2187, -1.092, -0.377)  # Newton seed (rounded) for the stable 3-degree gait
 fixed_point_jit = _poincare.fixed_point_jit
 step_jit = vj.step  # jitted by the library

@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import vhcjax as vj
-from vhcjax._hybrid import _step, simulate_jit
+from vhcjax.hybrid._simulate import step_unchecked, simulate_jit
 
 THESIS_7_5 = np.array([0.218669, -0.323389, -1.092386, -0.377377])  # thesis (7.5)
 THESIS_7_7 = THESIS_7_5 + 0.01  # thesis (7.7): every entry perturbed by 0.01
@@ -37,7 +37,7 @@ def thesis_walk(which="7.5"):
 
 
 # One step, batched over states and models (vmap), default config.
-step_batch = eqx.filter_jit(eqx.filter_vmap(lambda m, x: _step(m, x)))
+step_batch = eqx.filter_jit(eqx.filter_vmap(lambda m, x: step_unchecked(m, x)))
 # `NUM_STEPS` steps batched over states and models.
 walk_batch = eqx.filter_jit(
     eqx.filter_vmap(lambda m, x: vj.simulate(m, x, NUM_STEPS))

@@ -34,5 +34,4 @@ def _release_compiled_code():
     yield
     if _memory_maps() > 30_000:
         from vhcjax import _compile
-
         _compile.clear_caches()

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax import _gait
+from vhcjax.gait import _search as _gait
 from vhcjax.cli import main
 
 
@@ -107,7 +107,6 @@ def test_compiled_search_kept_on_disk_and_read_back(tmp_path):
 
 def test_command_enables_the_cache_only_when_asked(monkeypatch, tmp_path):
     from vhcjax import _compile
-
     calls = []
     monkeypatch.setattr(_compile, "enable_compilation_cache", calls.append)
     monkeypatch.delenv("VHCJAX_CACHE_DIR", raising=False)

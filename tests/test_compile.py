@@ -8,8 +8,6 @@ import numpy as np
 
 import vhcjax  # noqa: F401  (float64)
 from vhcjax import _compile
-
-
 def _f(x, scale):
     return jnp.sin(x) * scale + jnp.cumsum(x**2)
 

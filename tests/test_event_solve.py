@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax import _hybrid
-from vhcjax._event_solve import solve_to_event
+from vhcjax.hybrid import _simulate as _hybrid
+from vhcjax.hybrid._event_solve import solve_to_event
 
 H, V0, G, C, T0 = 1.0, 0.5, 9.81, 0.3, 0.1
 
@@ -79,7 +79,7 @@ def walker_state():
 
 
 def _step_out(model, x, config, adjoint=None):
-    sr = _hybrid._step(model, x, config, adjoint=adjoint)
+    sr = _hybrid.step_unchecked(model, x, config, adjoint=adjoint)
     return jnp.concatenate([sr.x_plus, sr.period[None]])
 
 

@@ -10,8 +10,8 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax import _gait, _vhc
-
+from vhcjax.gait import _search as _gait
+from vhcjax.gait import _vhc as _vhc
 SEED = (0.20, -1.0)  # thesis (7.2)
 SLOPES_DEG = (2.0, 3.0, 4.0)
 
@@ -180,7 +180,6 @@ def test_chord_search_as_two_programs_equals_one_program(monkeypatch):
     codes are bitwise those of the single program, a second call compiles nothing, and
     `vj.clear_caches()` drops them. Under `jax.jit` the single program is traced."""
     from vhcjax import _compile
-
     guesses = jnp.array([SEED, SEED, (2.5, 8.0), (0.2, 0.0)])
     model = _gait._with_psi(vj.CompassGait(), jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0])))
     axes = _gait._batched_axes(model)

@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax import _gait
-
+from vhcjax.gait import _search as _gait
 SEED = (0.20, -1.0)  # thesis (7.2)
 
 

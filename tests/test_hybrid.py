@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax._hybrid import _step
+from vhcjax.hybrid._simulate import step_unchecked
 
 import _paths  # noqa: F401  (puts benchmarks/ on sys.path)
 import _sim
@@ -203,7 +203,7 @@ def test_failure_codes_fell_bad_impact_nonfinite_no_impact():
 def test_failure_code_max_steps():
     model = _sim.make_model()
     few = vj.SolverConfig(max_steps=4)
-    out = eqx.filter_jit(_step)(model, jnp.asarray(_sim.THESIS_7_5), few)
+    out = eqx.filter_jit(step_unchecked)(model, jnp.asarray(_sim.THESIS_7_5), few)
     assert vj.result_names(out.result) == "max_steps_reached"
     assert np.all(np.isfinite(np.asarray(out.x_plus)))
 

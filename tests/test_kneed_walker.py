@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import vhcjax
-from vhcjax import _poincare as P
-from vhcjax._kneed_walker import KneedWalker
-from vhcjax._multidomain import multidomain_trajectory
+from vhcjax.hybrid import _poincare as P
+from vhcjax.models._kneed_walker import KneedWalker
+from vhcjax.hybrid._multidomain import multidomain_trajectory
 from vhcjax._results import RESULTS
 
 fixed_point_jit = P.fixed_point_jit
@@ -88,8 +88,8 @@ def test_impacts_at_the_gait_conserve_angular_momentum(kw, gait):
     np.testing.assert_allclose(kw.swing_leg_momentum(q, dqp), kw.swing_leg_momentum(q, dq),
                                rtol=1e-12)
     # heel strike: before relabelling, with the old stance foot lifting off
-    from vhcjax._kneed_walker import _KNEE
-    from vhcjax._multidomain import augmented_impact_locked
+    from vhcjax.models._kneed_walker import _KNEE
+    from vhcjax.hybrid._multidomain import augmented_impact_locked
 
     x = info.x_end[1]
     q, dq = x[:3], x[3:]

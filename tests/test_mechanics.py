@@ -14,8 +14,7 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax import _mechanics as mech
-
+from vhcjax.mechanics import _lagrangian as mech
 import _paths  # noqa: F401  (puts benchmarks/ on sys.path)
 import scipy_reference as ref
 import _sim
@@ -229,7 +228,7 @@ def test_energy_conserved_during_a_swing(model):
 
     Integrated at rtol = atol = 1e-12: the drift measures the integrator tolerance (at the
     default 1e-10 it is ~1e-10), the test checks that the vector field conserves energy."""
-    from vhcjax._hybrid import flow
+    from vhcjax.hybrid._simulate import flow
     import diffrax
 
     par = ref.Params()

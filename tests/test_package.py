@@ -40,5 +40,4 @@ def test_public_names():
 def test_cli_lists_simulate():
     from vhcjax import cli
 
-    assert "_cli_simulate" in cli.SUBCOMMANDS
     assert "simulate" in cli.build_parser().format_help()

@@ -5,8 +5,7 @@ import math
 import numpy as np
 
 import vhcjax as vj
-from vhcjax import _plotting as plotting
-
+from vhcjax.plotting import _simulation as plotting
 import _sim
 
 PNG = b"\x89PNG\r\n\x1a\n"

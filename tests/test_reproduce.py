@@ -7,7 +7,7 @@ import os
 import numpy as np
 import pytest
 
-from vhcjax import _reproduce as R
+from vhcjax.reproduce import _report as R
 from vhcjax.cli import main
 
 

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax._basin import axis_directions, wilson_interval
-from vhcjax._recovery import CONVERGED, FELL
+from vhcjax.robustness._basin import axis_directions, wilson_interval
+from vhcjax.robustness._recovery import CONVERGED, FELL
 
 from _robust import long_walk, returns_to, stable_gait
 
@@ -47,7 +47,7 @@ def test_slice_classification_spot_checked(slice8):
 def test_chunks_on_host_threads_give_the_same_classification(slice8, monkeypatch):
     """Two chunks of the slice's 64-member program run at once from host threads (one per
     CPU core) and classify every point as the one-chunk slice did, in order."""
-    from vhcjax._basin import classify_section_points
+    from vhcjax.robustness._basin import classify_section_points
 
     model = stable_gait()[0]
     gx, gy = np.meshgrid(slice8.offsets_x, slice8.offsets_y)

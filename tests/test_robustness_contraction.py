@@ -6,7 +6,7 @@ import math
 import numpy as np
 
 import vhcjax as vj
-from vhcjax._contraction import steps_to_shrink
+from vhcjax.robustness._contraction import steps_to_shrink
 
 from _robust import stable_gait
 

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax._push import direction, impulse_step, pulse_step
+from vhcjax.robustness._push import direction, impulse_step, pulse_step
 
 from _robust import long_walk, returns_to, stable_gait
 

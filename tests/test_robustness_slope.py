@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax._hybrid import DEFAULT_CONFIG
-from vhcjax import _poincare
-from vhcjax._terrain import floor_step_model
+from vhcjax.hybrid._simulate import DEFAULT_CONFIG
+from vhcjax.hybrid import _poincare as _poincare
+from vhcjax.robustness._terrain import floor_step_model
 
 from _robust import fixed_point_jit, long_walk, returns_to, stable_gait, step_jit
 

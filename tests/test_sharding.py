@@ -14,7 +14,7 @@ SCRIPT = textwrap.dedent(
     """
     import jax, jax.numpy as jnp, numpy as np
     import vhcjax as vj
-    from vhcjax._sharding import batched_map, default_mesh
+    from vhcjax._batching import batched_map, default_mesh
 
     assert len(jax.devices()) == 4, jax.devices()
 
@@ -41,8 +41,8 @@ SCRIPT = textwrap.dedent(
     print("OK", np.asarray(four[0]).shape, type(sharding).__name__)
 
     # library entry points shard their batches over all local devices by themselves
-    from vhcjax._basin import classify_section_points
-    from vhcjax._stability import bifurcation_diagram
+    from vhcjax.robustness._basin import classify_section_points
+    from vhcjax.stability._multipliers import bifurcation_diagram
 
     m = vj.CompassGait()
     z_star = jnp.array([0.2186688, -1.09238359, -0.37737395])
@@ -106,7 +106,7 @@ def test_in_chunks_runs_chunks_concurrently_and_keeps_their_order():
     import jax.numpy as jnp
     import numpy as np
 
-    from vhcjax._sharding import in_chunks
+    from vhcjax._batching import in_chunks
 
     started = threading.Barrier(2, timeout=30)
     threads = set()
@@ -129,7 +129,7 @@ def test_in_chunks_runs_chunks_concurrently_and_keeps_their_order():
 def test_host_workers_one_per_cpu_core_or_as_set(monkeypatch):
     import jax
 
-    from vhcjax._sharding import default_mesh, host_workers
+    from vhcjax._batching import default_mesh, host_workers
 
     monkeypatch.delenv("VHCJAX_HOST_WORKERS", raising=False)
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()

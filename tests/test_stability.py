@@ -10,8 +10,7 @@ import pytest
 
 import vhcjax
 from vhcjax import CompassGait
-from vhcjax import _stability as S
-
+from vhcjax.stability import _multipliers as S
 PSI3 = math.radians(3.0)
 
 

@@ -11,9 +11,9 @@ import pytest
 
 import vhcjax
 from vhcjax import CompassGait
-from vhcjax import _stability as S
-from vhcjax import _transverse as TL
-from vhcjax._vhc import phi_second_derivative, theta_dynamics_coefficients
+from vhcjax.stability import _multipliers as S
+from vhcjax.stability import _transverse as TL
+from vhcjax.gait._vhc import phi_second_derivative, theta_dynamics_coefficients
 
 SLOPES_DEG = [0.5, 3.0, 6.0]
 # Newton seeds only (rounded to 3-4 digits), one per (family, slope).
@@ -98,7 +98,7 @@ def test_orbit_rebuilt_from_vhc_matches_hybrid_simulation(mults):
 
 @eqx.filter_jit
 def _dense(m, x0, ts):
-    from vhcjax._hybrid import flow
+    from vhcjax.hybrid._simulate import flow
     import diffrax
 
     return flow(m, x0, ts[-1], vhcjax.DEFAULT_CONFIG, saveat=diffrax.SaveAt(ts=ts),

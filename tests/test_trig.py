@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax import _gait, trig
-
+from vhcjax.gait import _search as _gait
+from vhcjax import trig
 RNG = np.random.default_rng(7)
 
 
@@ -49,8 +49,7 @@ def test_each_angle_evaluated_once_per_field_evaluation(polynomial):
     (`round-nearest-even`) twice, once per angle."""
     import re
 
-    from vhcjax import _gait
-
+    from vhcjax.gait import _search as _gait
     model = vj.CompassGait()
     y, E0, th = jnp.array([-0.25, 0.5, 0.0]), jnp.array(1.0), jnp.array(0.2)
 

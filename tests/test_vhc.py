@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax import _gait, _vhc
-
-
+from vhcjax.gait import _search as _gait
+from vhcjax.gait import _vhc as _vhc
 def thesis_f0(p, E0, theta, phi, Dphi):
     """Appendix C.3, `function Dx = f0(theta, x, E0)`, copied term by term."""
     p1, p2, p3, p4, p5 = (p[k] for k in ("p1", "p2", "p3", "p4", "p5"))

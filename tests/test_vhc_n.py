@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 import vhcjax
-from vhcjax import _mechanics as mech
-from vhcjax import _poincare as P
-from vhcjax._pendulum_walker import PendulumWalker
+from vhcjax.mechanics import _lagrangian as mech
+from vhcjax.hybrid import _poincare as P
+from vhcjax.models._pendulum_walker import PendulumWalker
 from vhcjax._results import RESULTS
-from vhcjax._transverse import transverse_linearization
-from vhcjax._vhc_search import vhc_gait_search, vhc_orbit
+from vhcjax.stability._transverse import transverse_linearization
+from vhcjax.gait._vhc_n import vhc_gait_search, vhc_orbit
 
 fixed_point_jit = P.fixed_point_jit
 jacobian_jit = P.jacobian_jit
@@ -107,7 +107,7 @@ def test_pendulum_walker_walks_100_steps(pw, pw_gait):
 def test_n_dof_vhc_search_reproduces_two_dof_problem_1():
     """On the compass gait the n-DOF search (unknowns z, integration in theta) and the
     thesis Problem 1 solver (`_gait.vhc_search`, unknowns (a, b)) give the same gait."""
-    from vhcjax._gait import vhc_search
+    from vhcjax.gait._search import vhc_search
 
     cg = vhcjax.CompassGait()
     g_n = eqx.filter_jit(vhc_gait_search)(cg, jnp.array([0.21, -1.1, -0.37]))

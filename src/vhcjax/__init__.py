@@ -10,9 +10,9 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from ._compass_gait import CompassGait as CompassGait
+from .models import CompassGait as CompassGait
 from ._compile import clear_caches as clear_caches, enable_compilation_cache as enable_compilation_cache
-from ._hybrid import (
+from .hybrid import (
     DEFAULT_CONFIG as DEFAULT_CONFIG,
     FAST_CONFIG as FAST_CONFIG,
     Simulation as Simulation,
@@ -22,14 +22,14 @@ from ._hybrid import (
     simulate_batch as simulate_batch,
     step as step,
 )
-from ._mechanics import (
+from .mechanics import (
     acceleration as acceleration,
     augmented_impact as augmented_impact,
     coriolis_matrix as coriolis_matrix,
     gravity_vector as gravity_vector,
     mass_matrix as mass_matrix,
 )
-from ._model import WalkerModel as WalkerModel
+from .mechanics import WalkerModel as WalkerModel
 from . import trig as trig  # vectorizable sin/cos for model kinematics
 from ._results import RESULTS as RESULTS, result_codes as result_codes, result_names as result_names
 
@@ -38,53 +38,53 @@ try:
 except importlib.metadata.PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0"
 
-# ---- multi-domain hybrid systems and the passive kneed walker (issue 6) ----
-from ._kneed_walker import KneedWalker as KneedWalker
-from ._multidomain import (
+# ---- multi-domain hybrid systems and the passive kneed walker ----
+from .models import KneedWalker as KneedWalker
+from .hybrid import (
     DomainInfo as DomainInfo,
     MultiDomainModel as MultiDomainModel,
     multidomain_step as multidomain_step,
     multidomain_trajectory as multidomain_trajectory,
 )
-from ._pendulum_walker import PendulumWalker as PendulumWalker
-from ._vhc_search import (
+from .models import PendulumWalker as PendulumWalker
+from .gait import (
     VHCGait as VHCGait,
     VHCOrbit as VHCOrbit,
     vhc_gait_search as vhc_gait_search,
     vhc_orbit as vhc_orbit,
 )
 
-# ---- robustness: contraction, basin of attraction, slope/terrain sensitivity, pushes (issue 5) ----
-from ._basin import (
+# ---- robustness: contraction, basin of attraction, slope/terrain sensitivity, pushes ----
+from .robustness import (
     BasinSlice as BasinSlice,
     BasinVolume as BasinVolume,
     basin_slice as basin_slice,
     basin_volume as basin_volume,
     max_converging_perturbation as max_converging_perturbation,
 )
-from ._bisection import Threshold as Threshold, bisect_threshold as bisect_threshold
-from ._contraction import Contraction as Contraction, contraction as contraction
-from ._push import (
+from .robustness import Threshold as Threshold, bisect_threshold as bisect_threshold
+from .robustness import Contraction as Contraction, contraction as contraction
+from .robustness import (
     impulse_step as impulse_step,
     max_push as max_push,
     pulse_step as pulse_step,
     push_sensitivity_autodiff as push_sensitivity_autodiff,
     push_sensitivity_transverse as push_sensitivity_transverse,
 )
-from ._recovery import CONVERGED as CONVERGED, Recovery as Recovery, recover as recover
-from ._slope_sensitivity import SlopeSensitivity as SlopeSensitivity, slope_sensitivity as slope_sensitivity
-from ._terrain import (
+from .robustness import CONVERGED as CONVERGED, Recovery as Recovery, recover as recover
+from .robustness import SlopeSensitivity as SlopeSensitivity, slope_sensitivity as slope_sensitivity
+from .robustness import (
     FloorStepCompassGait as FloorStepCompassGait,
     gait_sensitivity_norm as gait_sensitivity_norm,
     max_floor_step as max_floor_step,
     terrain_recovery as terrain_recovery,
 )
 
-# ---- figures and animation of a simulation (issue 2); matplotlib is imported lazily ----
-from . import _plotting as plotting
+# ---- figures and animation of a simulation; matplotlib is imported lazily ----
+from . import plotting as plotting
 
-# ---- stability: transverse linearization, multipliers, period doubling (issue 4) ----
-from ._stability import (
+# ---- stability: transverse linearization, multipliers, period doubling ----
+from .stability import (
     BifurcationDiagram as BifurcationDiagram,
     GaitMultipliers as GaitMultipliers,
     bifurcation_diagram as bifurcation_diagram,
@@ -96,13 +96,13 @@ from ._stability import (
     period_doubling_slope as period_doubling_slope,
     period_k_orbit as period_k_orbit,
 )
-from ._transverse import (
+from .stability import (
     TransverseLinearization as TransverseLinearization,
     transverse_linearization as transverse_linearization,
 )
 
-# ---- gait search: VHC search (Problem 1), shooting (Problem 2), batches, sweeps (issue 3) ----
-from ._gait import (  # noqa: E402
+# ---- gait search: VHC search (Problem 1), shooting (Problem 2), batches, sweeps ----
+from .gait import (  # noqa: E402
     Gait as Gait,
     Sweep as Sweep,
     find_gait as find_gait,

@@ -1,0 +1,164 @@
+"""`vhcjax bifurcation` and `vhcjax multipliers`: period doubling, bifurcation diagram,
+multipliers in the complex plane."""
+
+import math
+
+from ._common import CLIError, add_model_flags, check_slope_deg, model_from_args, parse_range, \
+    print_json, progress
+
+
+def register(subparsers):
+    p = subparsers.add_parser(
+        "bifurcation",
+        help="bifurcation diagram and period-doubling slopes of the stable gait family",
+        description="Continue the stable period-1 gait over the slopes, compute its "
+        "multipliers (transverse linearization), locate period doublings (Newton-free "
+        "regula falsi on det(I + J), to 1e-5 deg), follow the period-2 gait, and simulate "
+        "every slope for TRANSIENT + RECORD steps from the period-1 gait (batched) to "
+        "record the step periods of the last RECORD steps.",
+    )
+    add_model_flags(p, slope=False)
+    p.add_argument("--slope-deg", required=True, metavar="START:STOP:STEP",
+                   help="slopes in degrees, e.g. 0.5:5.5:0.01")
+    p.add_argument("--transient", type=int, default=300,
+                   help="steps discarded as transient (default 300)")
+    p.add_argument("--record", type=int, default=64, help="steps recorded (default 64)")
+    p.add_argument("--csv", metavar="FILE",
+                   help="write slope_deg, result, pattern, period_1..period_RECORD (pattern: "
+                   "steps per repetition, 0 aperiodic, -1 fell)")
+    p.add_argument("--png", metavar="FILE", help="save the bifurcation diagram")
+    p.add_argument("--png-multipliers", metavar="FILE",
+                   help="save |multipliers| of the period-1 family against slope")
+    p.add_argument("--json", action="store_true", help="print a JSON summary")
+    p.set_defaults(func=run_bifurcation)
+
+    q = subparsers.add_parser(
+        "multipliers",
+        help="multipliers of a gait in the complex plane (two methods)",
+        description="Multipliers of the period-1 gait of FAMILY at the slope, by transverse "
+        "linearization (thesis ch. 6) and by autodiff of the Poincare map through the heel-"
+        "strike events; optional plot with the unit circle (thesis Figs 7.1, 7.8, 7.15).",
+    )
+    add_model_flags(q)
+    q.add_argument("--family", choices=["stable", "unstable"], default="stable")
+    q.add_argument("--png", metavar="FILE", help="save the complex-plane plot")
+    q.add_argument("--json", action="store_true", help="print a JSON object")
+    q.set_defaults(func=run_multipliers)
+    return p
+
+
+def _c(ev):
+    return [[float(e.real), float(e.imag)] for e in ev]
+
+
+def run_multipliers(args):
+    import numpy as np
+
+    from .. import stability as S
+    from .._results import result_names
+
+    model = model_from_args(args)
+    fam = S.period1_family([float(model.psi)], args.family, model=model)
+    if result_names(fam.result)[0] != "successful":
+        raise CLIError(f"no {args.family} gait found at {args.slope_deg} deg")
+    m = S.with_slope(model, float(model.psi))
+    gm = S.gait_multipliers_jit(m, fam.z[0])
+    tr, pc = np.asarray(gm.transverse), np.asarray(gm.poincare)
+    if args.png:
+        from ..plotting import plot_multipliers_complex
+
+        plot_multipliers_complex([tr, pc], ["transverse linearization", "Poincare (autodiff)"],
+                                 args.png, title=f"{args.family} gait, {args.slope_deg} deg")
+    out = {"slope_deg": args.slope_deg, "family": args.family, "z": np.asarray(fam.z[0]),
+           "multipliers": _c(tr), "multipliers_poincare": _c(pc),
+           "max_abs_multiplier": float(np.max(np.abs(tr))), "stable": bool(gm.stable)}
+    if args.json:
+        print_json(out)
+    else:
+        print(f"{args.family} gait at {args.slope_deg} deg: z = {np.asarray(fam.z[0])}")
+        for a, b in zip(tr, pc):
+            print(f"  transverse {a:.8f}   poincare {b:.8f}")
+        print("  stable" if bool(gm.stable) else "  unstable")
+    return 0
+
+
+def run_bifurcation(args):
+    import numpy as np
+
+    from .. import stability as S
+    from .._results import result_names
+
+    slopes = parse_range(args.slope_deg)
+    for s in slopes:
+        check_slope_deg(s)
+    if args.transient < 0 or args.record < 1:
+        raise CLIError("--transient must be >= 0 and --record >= 1")
+    model = model_from_args(args, slope_deg=slopes[0])
+    psis = np.radians(slopes)
+    bar = progress(total=5, desc="bifurcation")
+    fam = S.period1_family(psis, "stable", model=model)
+    ok1 = np.array(result_names(fam.result)) == "successful"
+    bar.update(1)
+    mult = S.family_multipliers(model, fam.psi, fam.z)
+    stable1 = np.asarray(mult.stable) & ok1
+    bar.update(1)
+    flips = []
+    pd2 = None
+    # first flip: the stable family loses stability through -1
+    idx = np.where(ok1[:-1] & ok1[1:] & stable1[:-1] & ~stable1[1:])[0]
+    if len(idx):
+        i = int(idx[0])
+        pd = S.period_doubling_slope(psis[i], psis[i + 1], np.asarray(fam.z[i]), model=model)
+        flips.append(pd.psi)
+        pd2 = pd
+    bar.update(1)
+    branch2 = None
+    if pd2 is not None:
+        branch2 = S.period2_branch(model, pd2, psis[psis > pd2.psi])
+        if branch2 is not None and branch2["flip_psi"] is not None:
+            flips.append(branch2["flip_psi"])
+    bar.update(1)
+    diag = S.bifurcation_diagram(psis, np.asarray(fam.z), model=model,
+                                 num_transient=args.transient, num_record=args.record)
+    bar.update(1)
+    bar.close()
+    names = result_names(diag.result)
+    if args.csv:
+        with open(args.csv, "w") as f:
+            f.write("slope_deg,result,pattern,"
+                    + ",".join(f"period_{i + 1}" for i in range(args.record)) + "\n")
+            for s, r, nd, per in zip(slopes, names, diag.period_pattern, diag.periods):
+                f.write(f"{s:.10g},{r},{nd}," + ",".join(f"{x:.12g}" for x in per) + "\n")
+    if args.png:
+        from ..plotting import plot_bifurcation
+
+        branches = [("period 1", np.degrees(psis)[ok1], np.asarray(fam.periods)[ok1],
+                     stable1[ok1])]
+        if branch2 is not None and len(branch2["psi"]):
+            branches.append(("period 2", np.degrees(branch2["psi"]), branch2["periods"],
+                             branch2["stable"]))
+        plot_bifurcation(diag, branches, args.png, flips_deg=[math.degrees(f) for f in flips])
+    if args.png_multipliers:
+        from ..plotting import plot_multipliers_vs_slope
+
+        plot_multipliers_vs_slope(np.degrees(psis)[ok1],
+                                  {"stable family": np.asarray(mult.transverse)[ok1]},
+                                  args.png_multipliers)
+    fell = np.asarray(diag.fell)
+    out = {
+        "period_doubling_slopes_deg": [math.degrees(f) for f in flips],
+        "period_doubling_slopes_deg_simulation": [
+            math.degrees(f) for f in S.period_doubling_slopes_from_diagram(diag)],
+        "first_fall_slope_deg": float(np.degrees(psis[fell][0])) if fell.any() else None,
+        "num_slopes": len(slopes),
+        "num_fell": int(fell.sum()),
+        "transient_steps": args.transient,
+        "recorded_steps": args.record,
+        "tolerance": "rtol=atol=1e-8 (FAST_CONFIG)",
+    }
+    if args.json:
+        print_json(out)
+    else:
+        for k, v in out.items():
+            print(f"{k}: {v}")
+    return 0

@@ -1,0 +1,84 @@
+"""What the subcommands share: model flags, input checks, JSON output, progress bars."""
+
+import argparse
+import json
+import math
+import sys
+
+class CLIError(Exception):
+    """A user error: printed as one line, exit status 2."""
+
+
+def add_model_flags(parser, *, slope=True, slope_default=3.0):
+    """Model flags shared by every command (SI units; slope in degrees)."""
+    g = parser.add_argument_group("model (compass gait, thesis Table 1 defaults)")
+    if slope:
+        g.add_argument("--slope-deg", type=float, default=slope_default,
+                       help="slope angle in degrees, in (0, 30) (default %(default)s)")
+    g.add_argument("--mass-hip", type=float, default=10.0, help="hip mass mH in kg (default 10)")
+    g.add_argument("--mass-leg", type=float, default=5.0, help="mass of each leg in kg (default 5)")
+    g.add_argument("--a", type=float, default=0.5, help="hip to leg centre of mass in m (default 0.5)")
+    g.add_argument("--b", type=float, default=0.5, help="leg centre of mass to foot in m (default 0.5)")
+    g.add_argument("--gravity", type=float, default=9.81, help="gravity in m/s^2 (default 9.81)")
+    return g
+
+
+def check_finite(name, *values):
+    for v in values:
+        if not math.isfinite(v):
+            raise CLIError(f"{name} must be a finite number, got {v}")
+
+
+def check_slope_deg(value, name="--slope-deg"):
+    check_finite(name, value)
+    if not 0.0 < value < 30.0:
+        raise CLIError(f"{name} must be in (0, 30) degrees, got {value}")
+
+
+def model_from_args(args, slope_deg=None):
+    """Build and validate a `CompassGait` from the shared flags."""
+    from .. import CompassGait
+
+    for flag in ("mass_hip", "mass_leg", "a", "b", "gravity"):
+        v = getattr(args, flag)
+        check_finite("--" + flag.replace("_", "-"), v)
+        if v <= 0:
+            raise CLIError(f"--{flag.replace('_', '-')} must be positive, got {v}")
+    if slope_deg is None:
+        slope_deg = args.slope_deg
+    check_slope_deg(slope_deg)
+    return CompassGait(
+        m1=args.mass_leg, m2=args.mass_leg, mH=args.mass_hip, a=args.a, b=args.b,
+        g=args.gravity, psi=math.radians(slope_deg),
+    )
+
+
+def parse_range(text, name="--slope-deg"):
+    """`START:STOP:STEP` (inclusive of STOP within half a step) -> list of floats."""
+    try:
+        parts = [float(p) for p in text.split(":")]
+    except ValueError:
+        raise CLIError(f"{name} must be START:STOP:STEP, got {text!r}") from None
+    if len(parts) != 3:
+        raise CLIError(f"{name} must be START:STOP:STEP, got {text!r}")
+    start, stop, step = parts
+    check_finite(name, start, stop, step)
+    if step <= 0 or stop < start:
+        raise CLIError(f"{name} needs STEP > 0 and STOP >= START, got {text!r}")
+    n = int(math.floor((stop - start) / step + 0.5)) + 1
+    return [start + i * step for i in range(n)]
+
+
+from .._json import to_jsonable as to_jsonable
+
+
+def print_json(obj):
+    print(json.dumps(to_jsonable(obj)))
+
+
+def progress(iterable=None, total=None, desc=None, disable=None):
+    """A tqdm progress bar on stderr (silent when stderr is not a terminal and in CI)."""
+    from tqdm import tqdm
+
+    return tqdm(iterable, total=total, desc=desc, file=sys.stderr, leave=False,
+                disable=disable, dynamic_ncols=True)

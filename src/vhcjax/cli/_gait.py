@@ -1,0 +1,172 @@
+"""`vhcjax gait` and `vhcjax sweep`: find periodic gaits (one slope, or a family along
+a range of slopes)."""
+
+import csv
+import math
+
+from ._common import (
+    CLIError, add_model_flags, check_slope_deg, model_from_args, parse_range, print_json,
+    progress,
+)
+
+#: CSV columns of `vhcjax sweep` (`sweep_row` writes them; append new ones at the end).
+CSV_COLUMNS = [
+    "slope_deg", "result", "a", "b", "c", "d", "e", "f", "g", "h", "T", "E0",
+    "step_length", "speed",
+    # stability (issue 4): transverse-linearization multipliers, by modulus
+    "mult1_re", "mult1_im", "mult2_re", "mult2_im", "mult3_re", "mult3_im",
+    "max_abs_multiplier", "stable",
+]
+PARAM_KEYS = ("a", "b", "c", "d", "e", "f", "g", "h", "T", "E0")
+
+
+def register(subparsers):
+    p = subparsers.add_parser(
+        "gait",
+        help="find a periodic gait (VHC search or shooting)",
+        description="Find the periodic gait of the passive compass gait on one slope: the "
+        "VHC search of thesis Problem 1 (unknowns a, b; d from the energy quadratic) or "
+        "shooting on the step-to-step map (Problem 2). Without --guess the gait is "
+        "continued from the known default-model gait, so no starting point is needed.",
+    )
+    add_model_flags(p)
+    _family_method(p, both=False)
+    p.add_argument("--guess", type=float, nargs=2, metavar=("A0", "B0"),
+                   help="initial guess for q1 (rad) and dq1 (rad/s) just after impact, e.g. "
+                   "the thesis seed 0.20 -1.0; default: continuation, no guess needed")
+    p.add_argument("--json", action="store_true",
+                   help='print {"result", "slope_deg", "family", "method", "x0", "params", '
+                   '"iterations", "residual"}')
+    p.set_defaults(func=run_gait)
+
+    s = subparsers.add_parser(
+        "sweep",
+        help="a gait family against the slope, by continuation",
+        description="Follow a gait family over a range of slopes by continuation (tangent "
+        "predictor, Newton corrector) and report where it ends and why.",
+    )
+    add_model_flags(s, slope=False)
+    s.add_argument("--slope-deg", required=True, metavar="START:STOP:STEP",
+                   help="slopes in degrees, e.g. 0.5:6:0.1 (inclusive), each in (0, 30)")
+    _family_method(s, both=True)
+    s.add_argument("--csv", metavar="FILE", help="write one row per slope: "
+                   + ", ".join(CSV_COLUMNS))
+    s.add_argument("--png", metavar="FILE", help="plot a, b, T and speed against slope")
+    s.add_argument("--json", action="store_true", help="print the sweep as JSON")
+    s.set_defaults(func=run_sweep)
+
+
+def _family_method(p, both):
+    p.add_argument("--family", default="stable",
+                   choices=("stable", "unstable", "both") if both else ("stable", "unstable"),
+                   help="root of the energy quadratic (5.13): stable = thesis (7.3), "
+                   "unstable = (7.8) (default %(default)s)")
+    p.add_argument("--method", default="vhc", choices=("vhc", "shooting"),
+                   help="vhc = thesis Problem 1, shooting = Problem 2 (default %(default)s)")
+
+
+def gait_json(gait, slope_deg):
+    """The JSON record of one gait (a dict; other commands may add keys)."""
+    import numpy as np
+
+    from .._results import result_names
+
+    return {
+        "result": result_names(gait.result),
+        "slope_deg": slope_deg,
+        "family": gait.family,
+        "method": gait.method,
+        "x0": np.asarray(gait.x_plus).tolist(),
+        "params": {k: float(getattr(gait, k)) for k in PARAM_KEYS},
+        "iterations": int(gait.iterations),
+        "residual": float(gait.residual),
+    }
+
+
+def run_gait(args):
+    import jax.numpy as jnp
+
+    from ..gait import find_gait
+
+    model = model_from_args(args)
+    guess = None
+    if args.guess is not None:
+        if not all(math.isfinite(v) for v in args.guess):
+            raise CLIError(f"--guess must be finite, got {args.guess}")
+        guess = jnp.asarray(args.guess)
+    gait = find_gait(model, args.family, args.method, guess, throw=False)
+    rec = gait_json(gait, args.slope_deg)
+    if args.json and rec["result"] == "successful":  # multipliers, two ways (issue 4)
+        from ..stability import gait_multipliers_jit, stability_json
+
+        rec.update(stability_json(gait_multipliers_jit(model, model.state_to_section(gait.x_plus))))
+    if args.json:
+        print_json(rec)
+    else:
+        print(f"{args.family} gait at {args.slope_deg} deg ({args.method}): {rec['result']}")
+        for k, v in rec["params"].items():
+            print(f"  {k:>3} = {v: .9f}")
+        print(f"  step length {float(gait.step_length):.6f} m, speed {float(gait.speed):.6f} m/s, "
+              f"{rec['iterations']} iterations, residual {rec['residual']:.2e}")
+    return 0 if rec["result"] == "successful" else 1
+
+
+def sweep_row(gait, i, slope_deg):
+    """One CSV row (a dict over `CSV_COLUMNS`) for member `i` of a batched gait."""
+    from .._results import result_names
+
+    row = {"slope_deg": slope_deg, "result": result_names(gait.result._value[i])}
+    for k in PARAM_KEYS + ("step_length", "speed"):
+        row[k] = float(getattr(gait, k)[i])
+    return row
+
+
+def run_sweep(args):
+    from ..gait import sweep
+
+    slopes = parse_range(args.slope_deg)
+    for v in slopes:
+        check_slope_deg(v)
+    model = model_from_args(args, slope_deg=slopes[0])
+    families = ("stable", "unstable") if args.family == "both" else (args.family,)
+    results = {}
+    bar = progress(total=len(families), desc="sweep")
+    for fam in families:
+        bar.set_description(f"sweep {fam}")
+        results[fam] = sweep(model, [math.radians(v) for v in slopes], fam, args.method)
+        bar.update(1)
+    bar.close()
+    rows = {fam: [sweep_row(sw.gaits, i, v) for i, v in enumerate(slopes)]
+            for fam, sw in results.items()}
+    if args.csv:  # multipliers of every gait in one batched call (issue 4)
+        from ..stability import add_stability_columns
+
+        for fam, sw in results.items():
+            add_stability_columns(model, sw.gaits, [math.radians(v) for v in slopes], rows[fam])
+    if args.csv:
+        with open(args.csv, "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=(["family"] if len(families) > 1 else [])
+                               + CSV_COLUMNS, extrasaction="ignore")
+            w.writeheader()
+            for fam in families:
+                for r in rows[fam]:
+                    w.writerow({**r, "family": fam} if len(families) > 1 else r)
+    if args.png:
+        from ..plotting import plot_sweep
+
+        plot_sweep(results, args.png)
+    summary = {}
+    for fam, sw in results.items():
+        n_ok = sum(r["result"] == "successful" for r in rows[fam])
+        summary[fam] = {"found": n_ok, "total": len(slopes), "ends": sw.ends()}
+    if args.json:
+        print_json({"method": args.method, "families": {
+            fam: {**summary[fam], "rows": rows[fam]} for fam in families}})
+    else:
+        for fam in families:
+            s = summary[fam]
+            print(f"{fam}: found at {s['found']} of {s['total']} slopes")
+            for e in s["ends"]:
+                print(f"  ends near {e['last_slope_deg']:.4g} deg (next: {e['slope_deg']:.4g} "
+                      f"deg): {e['reason']}")
+    return 0

@@ -1,0 +1,52 @@
+"""The `vhcjax` command: a thin layer over the library (no physics here).
+
+Each subcommand lives in its own module of `vhcjax.cli` exposing `register(subparsers)`;
+bad input becomes a one-line message and exit status 2 instead of a traceback.
+"""
+
+import argparse
+import importlib
+import os
+import sys
+
+from ._common import CLIError
+
+# Subcommand modules, in the order they appear in `vhcjax --help`.
+SUBCOMMANDS = [
+    "_simulate",
+    "_gait",  # gait, sweep
+    "_bifurcation",  # bifurcation, multipliers
+    "_robustness",  # contraction, basin, slope-sensitivity, push
+    "_reproduce",  # reproduce (thesis chapter 7 report)
+]
+
+
+def build_parser():
+    parser = argparse.ArgumentParser(
+        prog="vhcjax",
+        description="Periodic gaits of the passive compass-gait biped: simulate, find gaits, "
+        "check stability, measure robustness. Angles on the command line are in degrees "
+        "where the flag says so, radians elsewhere.",
+    )
+    sub = parser.add_subparsers(dest="command", required=True)
+    for name in SUBCOMMANDS:
+        importlib.import_module(f"vhcjax.cli.{name}").register(sub)
+    return parser
+
+
+def main(argv=None):
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if os.environ.get("VHCJAX_CACHE_DIR"):  # keep compiled programs on disk (README)
+        from .._compile import enable_compilation_cache
+
+        enable_compilation_cache(os.environ["VHCJAX_CACHE_DIR"])
+    try:
+        return int(args.func(args) or 0)
+    except CLIError as e:
+        print(f"vhcjax {args.command}: error: {e}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

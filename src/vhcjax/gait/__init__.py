@@ -1,0 +1,55 @@
+"""Periodic gaits: the VHC search (thesis Problem 1), shooting (Problem 2), batches,
+continuation and slope sweeps; the reduced dynamics of a virtual holonomic constraint.
+"""
+
+from ._search import (
+    batch_jacobian as batch_jacobian,
+    BoundaryData as BoundaryData,
+    complete_guess as complete_guess,
+    complete_guess_jit as complete_guess_jit,
+    continue_to_model as continue_to_model,
+    damped_newton as damped_newton,
+    damped_newton_batch as damped_newton_batch,
+    energy_gap as energy_gap,
+    FAMILIES as FAMILIES,
+    family_sign as family_sign,
+    find_gait as find_gait,
+    find_gaits as find_gaits,
+    Gait as Gait,
+    impact_configuration as impact_configuration,
+    impact_velocity_matrix as impact_velocity_matrix,
+    METHODS as METHODS,
+    quadratic_coefficients as quadratic_coefficients,
+    reference_guess as reference_guess,
+    reference_model as reference_model,
+    shooting_search as shooting_search,
+    solve_for_d as solve_for_d,
+    SUCCESS_TOL as SUCCESS_TOL,
+    sweep as sweep,
+    Sweep as Sweep,
+    velocity_relations as velocity_relations,
+    vhc_boundary as vhc_boundary,
+    VHC_CONFIG as VHC_CONFIG,
+    vhc_residual as vhc_residual,
+    vhc_search as vhc_search,
+)
+
+from ._vhc import (
+    constraint as constraint,
+    integral_I as integral_I,
+    phi_second_derivative as phi_second_derivative,
+    phi_vector_field as phi_vector_field,
+    reduced_coefficients as reduced_coefficients,
+    reduced_energy as reduced_energy,
+    reduced_mass as reduced_mass,
+    singularity_terms as singularity_terms,
+    theta_dot_squared as theta_dot_squared,
+    theta_dynamics_coefficients as theta_dynamics_coefficients,
+)
+
+from ._vhc_n import (
+    vhc_gait_search as vhc_gait_search,
+    vhc_orbit as vhc_orbit,
+    VHCGait as VHCGait,
+    VHCOrbit as VHCOrbit,
+)

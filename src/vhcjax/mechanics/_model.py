@@ -1,0 +1,120 @@
+"""The interface every walker model implements: energies, contact point, guard, relabelling.
+
+A model is an `eqx.Module` whose physical parameters are float64 array leaves (Python
+floats are converted on construction), so `jax.vmap` and `jax.grad` over masses, lengths,
+gravity and slope work out of the box, and a jitted function compiled for one model is
+reused for every other parameter value (a Python float would be a static, compile-time
+constant under `eqx.filter_jit`: one compilation per slope). From the
+energies, `vhcjax.mechanics` derives the equations of motion and the impact map.
+"""
+
+import abc
+import dataclasses
+from typing import ClassVar
+
+import equinox as eqx
+import jax.numpy as jnp
+
+from . import _lagrangian as mech
+class WalkerModel(eqx.Module):
+    """Abstract single-domain hybrid Lagrangian system with a point-foot heel strike.
+
+    Subclasses implement:
+
+    - `kinetic_energy(q, dq, base_velocity=None)`: kinetic energy with the stance foot
+      moving at `base_velocity` (zero or `None` while it is pinned); used for the
+      dynamics and for the augmented impact map (thesis 3.19-3.28).
+    - `potential_energy(q)`.
+    - `contact_point(q)`: the impacting foot relative to the stance foot (world frame).
+    - `guard(q)`: scalar, positive during the swing, crossing zero *downward* at heel
+      strike and never on mid-swing scuffing.
+    - `relabel(q, dq)`: the coordinate swap of the legs at impact (thesis 3.32).
+    - `fallen(q)`: boolean, the walker has fallen (hip on the ground, legs out of range).
+    - `slope_normal`: unit normal of the walking surface (world frame).
+    - `time_scale`: a characteristic time (s), used for default time limits.
+    """
+
+    n_dof: ClassVar[int]
+
+    def __post_init__(self):
+        for field in dataclasses.fields(self):
+            value = getattr(self, field.name, None)
+            if isinstance(value, float) or (isinstance(value, int) and not isinstance(value, bool)):
+                object.__setattr__(self, field.name, jnp.asarray(value, dtype=float))
+
+    @abc.abstractmethod
+    def kinetic_energy(self, q, dq, base_velocity=None): ...
+
+    @abc.abstractmethod
+    def potential_energy(self, q): ...
+
+    @abc.abstractmethod
+    def contact_point(self, q): ...
+
+    @abc.abstractmethod
+    def guard(self, q): ...
+
+    @abc.abstractmethod
+    def relabel(self, q, dq): ...
+
+    def strike_gate(self, q):
+        """Optional: a function crossing zero *upward* when a heel strike becomes possible
+        (the swing leg has passed the stance leg). `None` (the default) means no gate."""
+        return None
+
+    @abc.abstractmethod
+    def fallen(self, q): ...
+
+    @abc.abstractmethod
+    def section_to_state(self, z):
+        """Post-impact state from coordinates `z` (length 2n-1) on the post-impact section."""
+
+    @abc.abstractmethod
+    def state_to_section(self, x):
+        """Coordinates on the post-impact section of a post-impact state `x`."""
+
+    @property
+    @abc.abstractmethod
+    def slope_normal(self): ...
+
+    @property
+    @abc.abstractmethod
+    def time_scale(self): ...
+
+    # ---- derived quantities (generic) -------------------------------------------------
+    def mass_matrix(self, q):
+        return mech.mass_matrix(self, q)
+
+    def coriolis_matrix(self, q, dq):
+        return mech.coriolis_matrix(self, q, dq)
+
+    def gravity_vector(self, q):
+        return mech.gravity_vector(self, q)
+
+    def acceleration(self, q, dq, generalized_force=None):
+        return mech.acceleration(self, q, dq, generalized_force)
+
+    def energy(self, x):
+        n = self.n_dof
+        return mech.energy(self, x[:n], x[n:])
+
+    def vector_field(self, t, x, args=None):
+        """$\\dot x = (\\dot q, \\ddot q)$ with diffrax's `(t, y, args)` signature."""
+        del t, args
+        n = self.n_dof
+        q, dq = x[:n], x[n:]
+        return jnp.concatenate([dq, self.acceleration(q, dq)])
+
+    def impact(self, x_minus):
+        """Reset map: augmented impact (thesis 3.27) followed by relabelling (3.32).
+
+        **Returns:** `(x_plus, impulse, physical)` where `impulse` is the contact impulse
+        on the new stance foot (world frame) and `physical` says that it pushes the foot
+        away from the ground (no pulling impulse).
+        """
+        n = self.n_dof
+        q, dq = x_minus[:n], x_minus[n:]
+        dq_plus, _, impulse = mech.augmented_impact(self, q, dq)
+        q_new, dq_new = self.relabel(q, dq_plus)
+        physical = jnp.dot(impulse, self.slope_normal) > 0
+        return jnp.concatenate([q_new, dq_new]), impulse, physical

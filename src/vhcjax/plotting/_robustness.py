@@ -1,0 +1,153 @@
+"""Figures for the robustness analyses (matplotlib, Agg backend, imported lazily)."""
+
+import numpy as np
+
+
+def _plt():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+SECTION_LABELS = (r"$q_1$ (rad)", r"$\dot q_1$ (rad/s)", r"$\dot q_2$ (rad/s)")
+SECTION_SYMBOLS = (r"$q_1$", r"$\dot q_1$", r"$\dot q_2$")
+
+
+def plot_basin(b, path, title=None):
+    """Basin slice coloured by steps to converge; fallers grey, other cycles red,
+    undecided white; the gait marked by a star (compare Schwab and Wisse 2001)."""
+    from matplotlib.colors import ListedColormap
+
+    plt = _plt()
+    from ..robustness import CONVERGED, FELL, OTHER_CYCLE, UNDECIDED
+
+    ix, iy = b.axes
+    X = b.z_star[ix] + b.offsets_x
+    Y = b.z_star[iy] + b.offsets_y
+    fig, ax = plt.subplots(figsize=(6.4, 5.2), dpi=130)
+    extent = (X[0], X[-1], Y[0], Y[-1])
+    steps = np.where(b.label == CONVERGED, b.steps, np.nan).astype(float)
+    im = ax.imshow(steps, origin="lower", extent=extent, aspect="auto", cmap="viridis_r",
+                   interpolation="nearest")
+    for lab, color in ((FELL, "#bdbdbd"), (OTHER_CYCLE, "#d62728"), (UNDECIDED, "#ffffff")):
+        mask = np.where(b.label == lab, 1.0, np.nan)
+        if np.any(b.label == lab):
+            ax.imshow(mask, origin="lower", extent=extent, aspect="auto",
+                      cmap=ListedColormap([color]), interpolation="nearest")
+    ax.plot(b.z_star[ix], b.z_star[iy], marker="*", color="red", ms=14, mec="k",
+            label="gait", ls="none")
+    cb = fig.colorbar(im, ax=ax)
+    cb.set_label(f"steps to converge (within {b.tol:g} of the gait)")
+    ax.set_xlabel(SECTION_LABELS[ix] + " just after impact")
+    ax.set_ylabel(SECTION_LABELS[iy] + " just after impact")
+    other = [k for k in range(len(b.z_star)) if k not in b.axes]
+    fixed = ", ".join(f"{SECTION_SYMBOLS[k]} = {b.z_star[k]:.4f}" for k in other)
+    ax.set_title(title or f"Basin of attraction, slice ({fixed}); grey: falls\n"
+                 f"converging area {b.area:.4g}, fraction {b.fraction:.3f}", fontsize=9)
+    ax.legend(loc="upper right", fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def plot_contraction(c, path):
+    """Simulated recovery errors vs step with the multiplier prediction $\\rho^k$."""
+    plt = _plt()
+    d = np.asarray(c.distance)
+    k = np.arange(d.shape[1])
+    fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=130)
+    for row in d:
+        ax.semilogy(k, row, color="C0", alpha=0.35, lw=1)
+    rho = float(c.spectral_radius)
+    ref = np.median(d[:, 0]) * rho**k
+    ax.semilogy(k, ref, "k--", lw=1.5, label=rf"$\rho^k$, $\rho$ = {rho:.4f} (multipliers)")
+    ax.semilogy([], [], color="C0", label=f"simulated recoveries (fitted rate "
+                f"{float(c.measured_rate):.4f})")
+    ax.set_xlabel("step k")
+    ax.set_ylabel(r"$\|x_k - x^*\|_\infty$ after impact")
+    ax.set_title(f"Contraction: error /10 in {float(c.steps_10x):.2f} steps, /100 in "
+                 f"{float(c.steps_100x):.2f} (predicted)", fontsize=9)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def plot_terrain(heights, rec, period, path, gsn=None):
+    """Step times and distance to the gait after a floor step of each height."""
+    plt = _plt()
+    T = np.asarray(rec.step_times)
+    d = np.asarray(rec.distance)
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4), dpi=130)
+    cmap = plt.get_cmap("coolwarm")
+    hs = np.asarray(heights)
+    hmax = max(np.max(np.abs(hs)), 1e-12)
+    for i, h in enumerate(hs):
+        n = int(np.sum(T[i] > 0))
+        c = cmap(0.5 + 0.5 * h / hmax)
+        lbl = f"h = {1000 * h:+.1f} mm" + (" (falls)" if int(rec.label[i]) == 1 else "")
+        a1.plot(np.arange(n), T[i, :n], "o-", ms=3, color=c, label=lbl)
+        a2.semilogy(np.arange(n + 1), np.maximum(d[i, : n + 1], 1e-12), "o-", ms=3, color=c)
+    a1.axhline(period, color="k", lw=0.8, ls="--", label="gait period")
+    a1.set_xlabel("step (0 = the step onto the new level)")
+    a1.set_ylabel("step time (s)")
+    a1.legend(fontsize=7)
+    a2.set_xlabel("step")
+    a2.set_ylabel(r"$\|x_k - x^*\|_\infty$")
+    title = "Recovery from a single step up (+) / down (-)"
+    if gsn is not None:
+        title += f"; gait sensitivity norm {gsn:.3g} s/m"
+    fig.suptitle(title, fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def plot_push(phases, sens, angles, largest, path, unit="N s", p_max=None):
+    """Left: norm of the post-impact state's sensitivity to a unit hip impulse vs phase
+    (forward and upward). Right: largest push survived vs phase, per direction."""
+    plt = _plt()
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4), dpi=130)
+    S = np.asarray(sens)
+    a1.plot(phases, np.linalg.norm(S[:, :, 0], axis=1), "o-", ms=3, label="horizontal (+x)")
+    a1.plot(phases, np.linalg.norm(S[:, :, 1], axis=1), "s-", ms=3, label="vertical (+y)")
+    a1.set_xlabel("phase s of the push in the step")
+    a1.set_ylabel(r"$\|\partial x^+ / \partial P\|_2$  (per N s)")
+    a1.set_title("Linear sensitivity of the next post-impact state", fontsize=9)
+    a1.legend(fontsize=8)
+    for j, a in enumerate(angles):
+        a2.plot(phases, largest[:, j], "o-", ms=3, label=f"{np.degrees(a):.0f} deg")
+    if p_max is not None:
+        a2.axhline(p_max, color="k", lw=0.8, ls=":", label="search bound (survived beyond)")
+    a2.set_xlabel("phase s of the push in the step")
+    a2.set_ylabel(f"largest push survived ({unit})")
+    a2.set_title("Largest push after which the walker returns to the gait\n"
+                 "(0 deg = forward, 90 = up, 180 = backward, 270 = down)", fontsize=9)
+    a2.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
+
+
+def plot_slope(sens, path):
+    """Bar chart of the slope derivatives (per degree) of the gait quantities."""
+    plt = _plt()
+    deg = np.pi / 180
+    names = [r"$q_1^*$", r"$\dot q_1^*$", r"$\dot q_2^*$", "T", "L", "v", r"$|\lambda_1|$",
+             r"$|\lambda_3|$"]
+    vals = list(np.asarray(sens.dz) * deg) + [float(sens.dperiod) * deg,
+                                              float(sens.dstep_length) * deg,
+                                              float(sens.dspeed) * deg,
+                                              float(sens.dmodulus[0]) * deg,
+                                              float(sens.dmodulus[-1]) * deg]
+    fig, ax = plt.subplots(figsize=(6.4, 3.8), dpi=130)
+    ax.bar(names, vals, color=["C0"] * 3 + ["C1"] * 3 + ["C2"] * 2)
+    ax.axhline(0, color="k", lw=0.6)
+    ax.set_ylabel("derivative per degree of slope")
+    ax.set_title("Sensitivity of the gait to the slope (implicit differentiation)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)

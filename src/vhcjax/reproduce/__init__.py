@@ -1,0 +1,7 @@
+"""The thesis chapter-7 report: every number recomputed and checked.
+"""
+
+from ._report import (
+    N_SECTIONS as N_SECTIONS,
+    reproduce as reproduce,
+)

@@ -1,0 +1,131 @@
+"""Speed of contraction to a gait: spectral radius of the step map, and what it means in
+steps, predicted from the Floquet multipliers and measured from simulated recoveries.
+
+Near a gait $z^*$ the step map is $z_{k+1} - z^* \\approx J (z_k - z^*)$, so errors shrink
+asymptotically like $\\rho^k$ with $\\rho$ the spectral radius of $J = \\partial P/\\partial z$
+(largest multiplier modulus). The number of steps that shrinks an error by a factor 10 is
+$\\log 0.1 / \\log \\rho$. The measurement fits the decay rate of many simulated recoveries
+from small random perturbations (least squares on $\\log \\|z_k - z^*\\|$), independently of
+the Jacobian.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._compile import filter_jit
+from ..hybrid import DEFAULT_CONFIG
+from ..hybrid import jacobian
+from ._recovery import recover
+
+
+class Contraction(eqx.Module):
+    """Contraction to a gait.
+
+    - `multipliers`: eigenvalues of the step-map Jacobian, by modulus, descending.
+    - `spectral_radius`: $\\rho = \\max |\\lambda|$.
+    - `steps_10x`, `steps_100x`: $\\log 0.1/\\log\\rho$ and $\\log 0.01/\\log\\rho$ (predicted).
+    - `measured_rate`: median over the recoveries of the fitted per-step decay factor.
+    - `measured_rates`: the fitted factor of every recovery.
+    - `measured_steps_10x`, `measured_steps_100x`: median over recoveries of the first step
+      at which the error is below 1/10 (1/100) of the initial error.
+    - `distance`: $\\|x_k - x^*\\|_\\infty$ per recovery and step, shape `(batch, steps+1)`.
+    - `fit_window`: the steps `(k0, k1)` used in the fit.
+    """
+
+    multipliers: jax.Array
+    spectral_radius: jax.Array
+    steps_10x: jax.Array
+    steps_100x: jax.Array
+    measured_rate: jax.Array
+    measured_rates: jax.Array
+    measured_steps_10x: jax.Array
+    measured_steps_100x: jax.Array
+    distance: jax.Array
+    fit_window: tuple[int, int] = eqx.field(static=True)
+
+
+def steps_to_shrink(rho, factor):
+    """Steps for an error to shrink by `factor` (e.g. 10) at rate `rho`:
+    $\\log(1/\\text{factor})/\\log\\rho$ (inf if $\\rho \\ge 1$)."""
+    rho = jnp.asarray(rho)
+    return jnp.where(rho < 1, jnp.log(1.0 / factor) / jnp.log(jnp.minimum(rho, 1 - 1e-16)),
+                     jnp.inf)
+
+
+def _fit_rate(dist, k0, k1):
+    """Least-squares slope of log(dist[k]) over k0..k1 -> per-step factor."""
+    k = np.arange(k0, k1 + 1)
+    y = np.log(np.asarray(dist)[:, k0 : k1 + 1])
+    A = np.stack([k, np.ones_like(k)], axis=1).astype(float)
+    coef, *_ = np.linalg.lstsq(A, y.T, rcond=None)
+    return np.exp(coef[0])
+
+
+def _first_below(dist, factor):
+    d = np.asarray(dist)
+    below = d[:, 1:] < d[:, :1] / factor
+    return np.where(below.any(axis=1), below.argmax(axis=1) + 1, -1)
+
+
+def contraction(model, z_star, *, num_perturbations=32, scale=1e-3, num_steps=30,
+                fit_window=(6, 30), key=None, config=DEFAULT_CONFIG):
+    """Predicted and measured speed of contraction to the gait through `z_star`.
+
+    **Arguments:**
+
+    - `model`: a `WalkerModel`.
+    - `z_star`: section coordinates of a (stable) gait.
+    - `num_perturbations`: number of simulated recoveries.
+    - `scale`: size ($\\infty$-norm) of the random initial perturbations (rad, rad/s),
+      small enough for the linearization to hold.
+    - `num_steps`: steps simulated per recovery.
+    - `fit_window`: steps `(k0, k1)` over which the decay rate is fitted (after the
+      transient of the fast modes, before the solver's error floor).
+    - `key`: a `jax.random.PRNGKey` (default `PRNGKey(0)`).
+    - `config`: `SolverConfig` (default tolerances 1e-10: the fit needs errors down to
+      ~1e-9 resolved).
+
+    **Returns:** a `Contraction`. Host-side (calls `numpy` for the fit); not jittable.
+    """
+    z_star = jnp.asarray(z_star, dtype=float)
+    key = jax.random.PRNGKey(0) if key is None else key
+    J = _jacobian_jit(model, z_star, config)
+    ev = np.linalg.eigvals(np.asarray(J))
+    ev = ev[np.argsort(-np.abs(ev))]
+    rho = float(np.abs(ev[0]))
+    dz = jax.random.uniform(key, (num_perturbations, z_star.shape[0]), minval=-1.0, maxval=1.0)
+    dz = scale * dz / jnp.max(jnp.abs(dz), axis=1, keepdims=True)
+    x0 = jax.vmap(model.section_to_state)(z_star + dz)
+    rec = _recover_jit(model, x0, model.section_to_state(z_star), num_steps, config)
+    k0, k1 = fit_window
+    k1 = min(k1, num_steps)
+    rates = _fit_rate(rec.distance, k0, k1)
+    m10 = _first_below(rec.distance, 10.0)
+    m100 = _first_below(rec.distance, 100.0)
+    return Contraction(
+        multipliers=jnp.asarray(ev),
+        spectral_radius=jnp.asarray(rho),
+        steps_10x=steps_to_shrink(rho, 10.0),
+        steps_100x=steps_to_shrink(rho, 100.0),
+        measured_rate=jnp.asarray(np.median(rates)),
+        measured_rates=jnp.asarray(rates),
+        measured_steps_10x=jnp.asarray(np.median(m10[m10 > 0]) if np.any(m10 > 0) else np.nan),
+        measured_steps_100x=jnp.asarray(
+            np.median(m100[m100 > 0]) if np.any(m100 > 0) else np.nan),
+        distance=rec.distance,
+        fit_window=(k0, k1),
+    )
+
+
+@filter_jit
+def _jacobian_jit(model, z, config):
+    return jacobian(model, z, 1, config)
+
+
+@filter_jit
+def _recover_jit(model, x0, x_star, num_steps, config):
+    # tol=0: nobody "converges", every recovery runs all steps (a full error history).
+    return recover(model, x0, x_star, num_steps, tol=0.0, config=config,
+                   stop_when_converged=False)

@@ -1,0 +1,156 @@
+"""Does a perturbed walker return to its gait? Batched multi-step classification.
+
+The common core of the robustness analyses (contraction, basin of attraction, terrain and
+push disturbances): simulate a batch of post-impact states step by step and label each
+member as *converged* to the gait (within `tol` of the fixed point, with the number of
+steps it took), *fell* (with the failure code of the step that failed), *other cycle*
+(settled on a different periodic motion, e.g. period 2) or *undecided*. The batch stops
+as soon as every member is decided, so a chunk of quick fallers and quick recoveries
+costs a few steps, not `num_steps`.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._compile import filter_jit
+from .. import trig
+from ..hybrid import FAST_CONFIG, step_unchecked
+from .._results import RESULTS
+
+CONVERGED, FELL, OTHER_CYCLE, UNDECIDED = 0, 1, 2, 3
+LABEL_NAMES = ("converged", "fell", "other_cycle", "undecided")
+
+
+class Recovery(eqx.Module):
+    """Outcome of a batched recovery simulation (leading batch axis everywhere).
+
+    - `label`: `CONVERGED` (0), `FELL` (1), `OTHER_CYCLE` (2) or `UNDECIDED` (3).
+    - `steps`: steps taken to come within `tol` of the gait (0 if it started there);
+      for fallers the step on which they fell (1-based); -1 otherwise.
+    - `period`: for `OTHER_CYCLE`, the period (in steps) of the cycle found; else 0.
+    - `result`: a `RESULTS` code per member: `successful` (converged), the failure of the
+      step that failed (`fell`, `no_impact`, `bad_impact`, ...), `other_cycle` or
+      `undecided`.
+    - `x_final`: last post-impact state.
+    - `distance`: $\\|x_k - x^*\\|_\\infty$ after every step (shape `(batch, num_steps+1)`,
+      entry 0 is the initial state; entries after the member stopped repeat its last value).
+    - `step_times`: duration of every step (0 after the member stopped).
+    """
+
+    label: jax.Array
+    steps: jax.Array
+    period: jax.Array
+    result: RESULTS
+    x_final: jax.Array
+    distance: jax.Array
+    step_times: jax.Array
+
+
+def recover(model, x0, x_star, num_steps=50, *, tol=1e-4, cycle_tol=1e-5, max_period=4,
+            config=FAST_CONFIG, first_step=None, stop_when_converged=True):
+    """Simulate a batch of post-impact states and classify their return to a gait.
+
+    **Arguments:**
+
+    - `model`: a `WalkerModel`.
+    - `x0`: post-impact states, shape `(batch, 2n)`.
+    - `x_star`: post-impact state of the gait (a fixed point of the step map).
+    - `num_steps`: largest number of steps simulated (static).
+    - `tol`: converged when $\\|x_k - x^*\\|_\\infty <$ `tol` (rad, rad/s).
+    - `cycle_tol`: a survivor with $\\|x_N - x_{N-p}\\|_\\infty <$ `cycle_tol` for some
+      `p <= max_period` is labelled `OTHER_CYCLE` with period `p`.
+    - `config`: `SolverConfig` of the swing integration (default `FAST_CONFIG`,
+      rtol = atol = 1e-8).
+    - `first_step`: optional callable `(x, alive) -> StepResult` (batched) replacing the
+      first step, e.g. a step onto a raised floor or a pushed step; its initial state is
+      then not compared with the gait (a disturbance is yet to come).
+    - `stop_when_converged`: if False, converged members keep walking (for recovery
+      curves); their label and `steps` still record the first time within `tol`.
+
+    **Returns:** a `Recovery`.
+    """
+    with trig.polynomial():  # many walkers x many steps: vectorizable sin/cos (see `trig`)
+        return _recover(model, x0, x_star, num_steps, tol, cycle_tol, max_period, config,
+                        first_step, stop_when_converged)
+
+
+def _recover(model, x0, x_star, num_steps, tol, cycle_tol, max_period, config, first_step,
+             stop_when_converged):
+    x0 = jnp.asarray(x0, dtype=float)
+    x_star = jnp.asarray(x_star, dtype=float)
+    B = x0.shape[0]
+    H = max_period + 1
+    dist0 = jnp.max(jnp.abs(x0 - x_star), axis=-1)
+    conv0 = (dist0 < tol) & (first_step is None)
+
+    def batched_step(mdl, x, alive):
+        return jax.vmap(lambda xx, aa: step_unchecked(mdl, xx, config, alive=aa))(x, alive)
+
+    def update(carry, sr):
+        k, x, alive, label, steps, code, hist, dist, times = carry
+        ok = sr.result._value == RESULTS.successful._value
+        fail = alive & ~ok
+        x_new = jnp.where((alive & ok)[:, None], sr.x_plus, x)
+        d = jnp.max(jnp.abs(x_new - x_star), axis=-1)
+        newly_conv = alive & ok & (d < tol) & (label < 0)
+        label = jnp.where(fail, FELL, jnp.where(newly_conv, CONVERGED, label))
+        steps = jnp.where(newly_conv | fail, k + 1, steps)
+        code = jnp.where(fail, sr.result._value, code)
+        times = times.at[:, k].set(jnp.where(alive, sr.period, 0.0))
+        if stop_when_converged:
+            alive = alive & ok & ~newly_conv
+        else:
+            alive = alive & ok
+        hist = hist.at[:, (k + 1) % H].set(x_new)
+        dist = dist.at[:, k + 1].set(d)
+        return (k + 1, x_new, alive, label, steps, code, hist, dist, times)
+
+    label0 = jnp.where(conv0, CONVERGED, -1)
+    steps0 = jnp.where(conv0, 0, -1)
+    alive0 = ~conv0 if stop_when_converged else jnp.ones(B, bool)
+    code0 = jnp.full(B, RESULTS.successful._value)
+    hist0 = jnp.zeros((B, H, x0.shape[-1])).at[:, 0].set(x0)
+    dist_arr0 = jnp.broadcast_to(dist0[:, None], (B, num_steps + 1))
+    times0 = jnp.zeros((B, num_steps))
+    carry = (0, x0, alive0, label0, steps0, code0, hist0, dist_arr0, times0)
+    # The first step may use another model (terrain disturbance): done outside the loop.
+    sr0 = batched_step(model, x0, alive0) if first_step is None else first_step(x0, alive0)
+    carry = update(carry, sr0)
+
+    def cond(c):
+        return (c[0] < num_steps) & jnp.any(c[2])
+
+    def body(c):
+        return update(c, batched_step(model, c[1], c[2]))
+
+    k, x, alive, label, steps, code, hist, dist, times = jax.lax.while_loop(cond, body, carry)
+    # Members that stopped early: fill the rest of the distance history with the last value.
+    idx = jnp.arange(num_steps + 1)
+    last = jnp.take_along_axis(dist, jnp.full((B, 1), k), axis=1)
+    dist = jnp.where(idx[None, :] > k, last, dist)
+
+    # Survivors that never came within tol: another cycle of period p, or undecided.
+    undecided = label < 0
+    gaps = jnp.stack(
+        [jnp.max(jnp.abs(x - hist[:, (k - p) % H]), axis=-1) for p in range(1, H)], axis=1
+    )
+    is_cycle = gaps < cycle_tol
+    period = jnp.where(jnp.any(is_cycle, axis=1), jnp.argmax(is_cycle, axis=1) + 1, 0)
+    other = undecided & (period > 0) & (k >= H)
+    label = jnp.where(other, OTHER_CYCLE, jnp.where(undecided, UNDECIDED, label))
+    period = jnp.where(other, period, 0)
+    code = jnp.where(other, RESULTS.other_cycle._value,
+                     jnp.where(label == UNDECIDED, RESULTS.undecided._value, code))
+    result = eqx.tree_at(lambda r: r._value, RESULTS.successful, code)
+    return Recovery(label, steps, period, result, x, dist, times)
+
+
+recover_jit = filter_jit(recover)
+
+
+def label_names(label):
+    """Names of recovery labels (outside `jit`)."""
+    import numpy as np
+
+    return np.asarray(LABEL_NAMES, dtype=object)[np.asarray(label)].tolist()

@@ -1,0 +1,105 @@
+"""Sensitivity of a gait to the slope: derivatives of the fixed point, step period, speed
+and Floquet multipliers with respect to $\\psi$, by implicit differentiation through the
+fixed-point equation.
+
+With $z^*(\\psi)$ defined by $P(z^*, \\psi) = z^*$, the implicit function theorem gives
+$\\mathrm d z^*/\\mathrm d\\psi = (I - J)^{-1}\\,\\partial P/\\partial\\psi$ with
+$J = \\partial P/\\partial z$; both partial derivatives are forward-mode autodiff through
+the heel-strike event. Period and step length are functions of $(z, \\psi)$ differentiated
+the same way (total derivative). The multipliers' derivatives use the eigenvalue
+perturbation formula $\\mathrm d\\lambda_i = w_i^H\\,\\mathrm dJ\\,v_i / (w_i^H v_i)$ with
+$\\mathrm dJ$ the directional derivative of the Jacobian along $(\\mathrm dz^*, 1)$
+(forward over forward, one trace). Finite differences of re-solved gaits check all of it in the tests.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._compile import filter_jit
+from ..hybrid import DEFAULT_CONFIG
+
+
+def _with_psi(model, psi):
+    return eqx.tree_at(lambda m: m.psi, model, psi)
+
+
+def gait_outputs(model, z, config=DEFAULT_CONFIG):
+    """$(P(z), T, L, v)$: next section point, step period (s), step length (m, foot to foot
+    at heel strike) and mean speed $L/T$ (m/s, along the slope) of one step from `z`."""
+    from ..hybrid import step_unchecked
+
+    x0 = model.section_to_state(z)
+    sr = step_unchecked(model, x0, config)
+    L = jnp.linalg.norm(model.contact_point(sr.x_minus[: model.n_dof]))
+    return model.state_to_section(sr.x_plus), sr.period, L, L / sr.period
+
+
+class SlopeSensitivity(eqx.Module):
+    """Values at the gait and their derivatives with respect to the slope $\\psi$ (per rad).
+
+    - `z`, `dz`: fixed point (section coordinates) and $\\mathrm dz^*/\\mathrm d\\psi$.
+    - `period`, `dperiod`: step period (s) and its derivative.
+    - `step_length`, `dstep_length`: step length (m).
+    - `speed`, `dspeed`: mean speed (m/s).
+    - `multipliers`, `dmultipliers`: Floquet multipliers (complex, by modulus) and their
+      derivatives; `dmodulus`: derivatives of their moduli.
+    - `jacobian`, `djacobian`: $J$ and $\\mathrm dJ/\\mathrm d\\psi$ (total).
+    """
+
+    z: jax.Array
+    dz: jax.Array
+    period: jax.Array
+    dperiod: jax.Array
+    step_length: jax.Array
+    dstep_length: jax.Array
+    speed: jax.Array
+    dspeed: jax.Array
+    multipliers: np.ndarray
+    dmultipliers: np.ndarray
+    dmodulus: np.ndarray
+    jacobian: jax.Array
+    djacobian: jax.Array
+
+
+@filter_jit
+def _implicit(model, z, config):
+    # One second-order forward trace over u = (z, psi): the first derivatives of all
+    # outputs and the derivatives of the step-map Jacobian J = dP/dz in every direction.
+    nz = z.shape[0]
+    u = jnp.concatenate([z, jnp.asarray(model.psi, dtype=float)[None]])
+
+    def F(uu):
+        return gait_outputs(_with_psi(model, uu[nz]), uu[:nz], config)
+
+    def first(uu):
+        d = jax.jacfwd(F)(uu)
+        return d[0][:, :nz], (d, F(uu))
+
+    H, (d, outs) = jax.jacfwd(first, has_aux=True)(u)  # H[i, j, k] = d J_ij / d u_k
+    J = d[0][:, :nz]
+    dz = jnp.linalg.solve(jnp.eye(nz) - J, d[0][:, nz])
+    du = jnp.concatenate([dz, jnp.ones(1)])
+    total = [d[i] @ du for i in (1, 2, 3)]
+    dJ = H @ du
+    return outs, dz, total, J, dJ
+
+
+def slope_sensitivity(model, z_star, *, config=DEFAULT_CONFIG):
+    """Derivatives with respect to the slope of the gait through `z_star` (a fixed point
+    of the step map of `model`, e.g. from `vhcjax.hybrid.fixed_point`).
+
+    **Returns:** a `SlopeSensitivity`. The eigen-decomposition runs on the host (numpy).
+    """
+    z = jnp.asarray(z_star, dtype=float)
+    (zn, T, L, v), dz, (dT, dL, dv), J, dJ = _implicit(model, z, config)
+    Jn, dJn = np.asarray(J), np.asarray(dJ)
+    lam, V = np.linalg.eig(Jn)
+    order = np.argsort(-np.abs(lam))
+    lam, V = lam[order], V[:, order]
+    W = np.linalg.inv(V)  # rows: left eigenvectors with W V = I
+    dlam = np.einsum("ij,jk,ki->i", W, dJn, V)
+    dmod = np.real(np.conj(lam) * dlam) / np.abs(lam)
+    return SlopeSensitivity(z, dz, T, dT, L, dL, v, dv, lam, dlam, dmod, J, dJ)
+

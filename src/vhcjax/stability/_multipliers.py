@@ -1,0 +1,596 @@
+"""Stability of gaits: multipliers two ways, period doubling, period-k gaits, bifurcations.
+
+- `gait_multipliers`: Floquet multipliers of a period-1 gait by the transverse
+  linearization (thesis ch. 6, `vhcjax.stability`) and, independently, as the
+  eigenvalues of the Poincare-map Jacobian by forward-mode autodiff through the
+  heel-strike events (`vhcjax.hybrid.jacobian`). Batched over slopes by `vmap`
+  (`family_multipliers`).
+- `midswing_multipliers`: the same multipliers on another Poincare section
+  ($q_1 = 0$ in mid-swing), a check that they do not depend on the section.
+- `period1_family`: the period-1 gaits over a range of slopes (continuation).
+- `period_doubling_slope`: where a multiplier of the stable family crosses $-1$
+  (secant/bisection on $\\det(I + J)$, which changes sign there).
+- `period_k_orbit`: fixed points of $P^k$ (k = 2, 4) with their multipliers.
+- `bifurcation_diagram`: Goswami et al. (1998) style: long batched simulations from
+  the period-1 gait, step periods of the last steps against slope, falls marked.
+"""
+
+import math
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+
+from .._compile import filter_jit
+from ..models import CompassGait
+from ..hybrid import solve_to_event
+from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, ode_solver, step_unchecked, simulate
+from .. import hybrid as _poincare
+from ..hybrid import fixed_point, jacobian, step_map
+from .._results import RESULTS
+from .._batching import MAX_DISPATCH, host_workers, in_chunks, round_to_devices, shard_batch
+from ._transverse import TransverseLinearization, transverse_linearization
+
+#: Stable and unstable period-1 gaits of the default compass gait at 3 degrees
+#: (section coordinates $(q_1, \dot q_1, \dot q_2)$), seeds for the continuation.
+SEEDS_3DEG = {
+    "stable": (0.2186688, -1.09238359, -0.37737395),
+    "unstable": (0.20467554, -1.21057184, -0.71248882),
+}
+
+
+def with_slope(model, psi):
+    """`model` with its slope replaced by `psi` (rad), as a JAX leaf (no recompiles)."""
+    return eqx.tree_at(lambda m: m.psi, model, jnp.asarray(psi, float))
+
+
+def _sort(ev):
+    return ev[jnp.argsort(-jnp.abs(ev))]
+
+
+# ---- multipliers of one gait, two ways --------------------------------------------------
+class GaitMultipliers(eqx.Module):
+    """Multipliers of a period-1 gait.
+
+    - `transverse`: eigenvalues of $\\Xi$ (thesis 6.42), complex (2n-1,), by modulus.
+    - `poincare`: eigenvalues of the Poincare-map Jacobian (jacfwd through the events).
+    - `max_abs`: the largest modulus (transverse linearization).
+    - `stable`: `max_abs < 1`.
+    - `period`, `x_minus`: from the hybrid step.
+    - `result`: `successful` or the first failure of the step / the linearization.
+    - `linearization`: the full `TransverseLinearization` (Xi, Phi(T), dF, ...).
+    """
+
+    transverse: jax.Array
+    poincare: jax.Array
+    max_abs: jax.Array
+    stable: jax.Array
+    period: jax.Array
+    x_minus: jax.Array
+    result: RESULTS
+    linearization: TransverseLinearization
+
+
+def _gait_multipliers(model, z, config=DEFAULT_CONFIG):
+    """Both multiplier computations at the period-1 gait with section coordinates `z`."""
+    z = jnp.asarray(z, float)
+    x0 = model.section_to_state(z)
+    sr = step_unchecked(model, x0, config)
+    tl = transverse_linearization(model, x0, sr.x_minus, sr.period)
+    pm = _sort(jnp.linalg.eigvals(jacobian(model, z, 1, config)))
+    code = RESULTS.where(sr.result == RESULTS.successful, tl.result, sr.result)
+    mx = jnp.max(jnp.abs(tl.multipliers))
+    return GaitMultipliers(tl.multipliers, pm, mx, mx < 1.0, sr.period, sr.x_minus, code, tl)
+
+
+@filter_jit
+def _family_multipliers_padded(model, psis, zs, config):
+    return jax.vmap(lambda p, z: _gait_multipliers(with_slope(model, p), z, config))(psis, zs)
+
+
+_MAX_CHUNK = MAX_DISPATCH
+
+
+def _bucket(n):
+    """Batch sizes that share a compilation: 8, 64, then multiples of 256."""
+    return 8 if n <= 8 else 64 if n <= 64 else 256 * -(-n // 256)
+
+
+def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, mesh=None):
+    """`gait_multipliers` for many slopes in one batched (`vmap`) call.
+
+    `psis` (B,) in rad, `zs` (B, 2n-1) the gaits there. Returns a batched
+    `GaitMultipliers`. The batch is padded (copies of the first member) to 8, 64 or a
+    multiple of 256, so that every batch size up to the bucket shares one compilation:
+    tracing the transverse linearization through diffrax costs far more than running it;
+    batches above 256 run as chunks of 256, one per CPU core at a time
+    (`_sharding.host_workers`).
+    Batches above one member are split over the devices of `mesh` (default: all local
+    devices).
+    """
+    psis = jnp.atleast_1d(jnp.asarray(psis, float))
+    zs = jnp.asarray(zs, float).reshape(psis.shape[0], -1)
+    n = psis.shape[0]
+    pad = (_bucket(n) if n == 1 else round_to_devices(_bucket(n), mesh)) - n
+    psis = jnp.concatenate([psis, jnp.broadcast_to(psis[:1], (pad,))])
+    zs = jnp.concatenate([zs, jnp.broadcast_to(zs[:1], (pad, zs.shape[1]))])
+    if n > _MAX_CHUNK:  # see `_sharding.MAX_DISPATCH`; every chunk is one full bucket
+        out = in_chunks(lambda i, j: family_multipliers(model, psis[i:j], zs[i:j], config,
+                                                        mesh=mesh), n + pad, _MAX_CHUNK,
+                        host_workers(mesh))
+        return jax.tree_util.tree_map(lambda x: x[:n], out)
+    psis, zs = shard_batch((psis, zs), mesh)
+    out = _family_multipliers_padded(model, psis, zs, config)
+    return jax.tree_util.tree_map(lambda x: x[:n], out)
+
+
+def gait_multipliers(model, z, config=DEFAULT_CONFIG):
+    """Both multiplier computations at the period-1 gait with section coordinates `z`:
+    `transverse` (eigenvalues of Xi, thesis 6.42) and `poincare` (eigenvalues of the
+    autodiff Jacobian of the step map), sorted by modulus.
+
+    Runs as a batch of one of `family_multipliers` (same compiled program) when the
+    model has a slope `psi`; otherwise compiles on its own.
+    """
+    if not hasattr(model, "psi"):
+        return _gait_multipliers_jit(model, z, config)
+    out = family_multipliers(model, jnp.asarray(model.psi)[None], jnp.asarray(z, float)[None], config)
+    return jax.tree_util.tree_map(lambda x: x[0], out)
+
+
+_gait_multipliers_jit = filter_jit(_gait_multipliers)
+gait_multipliers_jit = gait_multipliers
+
+
+def finite_difference_jacobian(model, z, k=1, h=1e-6, config=DEFAULT_CONFIG):
+    """Central finite differences of $P^k$: an autodiff-free check of `jacobian`."""
+    z = jnp.asarray(z, float)
+    eye = jnp.eye(z.shape[0], dtype=z.dtype)
+
+    def col(e):
+        return (step_map(model, z + h * e, k, config).z_next
+                - step_map(model, z - h * e, k, config).z_next) / (2 * h)
+
+    return jax.vmap(col, out_axes=1)(eye)
+
+
+finite_difference_jacobian_jit = filter_jit(finite_difference_jacobian)
+
+
+# ---- a second Poincare section: q1 = 0 in mid-swing -------------------------------------
+def _gated_strike_event(model):
+    """Heel strike (downward guard crossing) once the strike gate is open, in one stage
+    (the flow may start with the gate already open)."""
+
+    def cond(t, y, args, **kwargs):
+        q = y[: model.n_dof]
+        # Negative while the gate is closed: opening it is then never a downward crossing,
+        # whatever the sign of the guard there (it is negative when the legs cross below
+        # the slope line, as for the unstable family).
+        return jnp.where(model.strike_gate(q) > 0, model.guard(q), -1.0 - jnp.abs(model.guard(q)))
+
+    return diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13),
+                         direction=False)
+
+
+def _midswing_event():
+    def cond(t, y, args, **kwargs):
+        return y[0]
+
+    return diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13),
+                         direction=False)
+
+
+def _flow_event(model, x0, event, config):
+    sol = solve_to_event(
+        model.vector_field, (event.cond_fn,), (event.direction,), x0, None, 0.0,
+        config.t_max_factor * model.time_scale, solver=ode_solver(config.solver),
+        rtol=config.rtol, atol=config.atol, max_steps=config.max_steps,
+    )
+    ok = sol.result == diffrax.RESULTS.event_occurred
+    return sol.ys[-1], sol.ts[-1], ok
+
+
+def midswing_map(model, w, config=DEFAULT_CONFIG):
+    """Return map on the mid-swing section $\\{q_1 = 0, \\dot q_1 < 0\\}$ of a compass-gait
+    walker, coordinates $w = (q_2, \\dot q_1, \\dot q_2)$: swing to heel strike, impact,
+    swing to the next $q_1 = 0$. **Returns:** `(w_next, ok)`."""
+    x = jnp.concatenate([jnp.zeros(1, w.dtype), w])
+    xm, _, ok1 = _flow_event(model, x, _gated_strike_event(model), config)
+    xp, _, _ = model.impact(xm)
+    xs, _, ok2 = _flow_event(model, xp, _midswing_event(), config)
+    return xs[1:], ok1 & ok2
+
+
+def to_midswing(model, z, config=DEFAULT_CONFIG):
+    """Section coordinates on the mid-swing section of the orbit through post-impact `z`."""
+    xs, _, ok = _flow_event(model, model.section_to_state(z), _midswing_event(), config)
+    return xs[1:], ok
+
+
+@filter_jit
+def midswing_multipliers(model, z, config=DEFAULT_CONFIG):
+    """Multipliers of the gait through post-impact `z`, computed on the mid-swing section
+    $q_1 = 0$ (jacfwd of `midswing_map`). **Returns:** `(multipliers, w, ok)`."""
+    w, ok0 = to_midswing(model, z, config)
+    J = jax.jacfwd(lambda ww: midswing_map(model, ww, config)[0])(w)
+    _, ok = midswing_map(model, w, config)
+    return _sort(jnp.linalg.eigvals(J)), w, ok0 & ok
+
+
+# ---- the period-1 family over slopes ----------------------------------------------------
+_fixed_point_jit = _poincare.fixed_point_jit
+
+
+@filter_jit
+def _fixed_points_batch(model, psis, z0s, k=1, config=DEFAULT_CONFIG):
+    return jax.vmap(lambda p, z: fixed_point(with_slope(model, p), z, k, config=config))(
+        psis, z0s)
+
+
+class Family(eqx.Module):
+    """Period-1 gaits along a slope range: `psi` (rad), `z` (B, 2n-1), `periods` (B,),
+    `result` (per slope)."""
+
+    psi: jax.Array
+    z: jax.Array
+    periods: jax.Array
+    result: RESULTS
+
+
+def period1_family(psis, family="stable", *, model=None, seed=None, seed_psi=math.radians(3.0),
+                   coarse_step=math.radians(0.1), config=DEFAULT_CONFIG):
+    """Period-1 gaits at the slopes `psis` (rad), continued from a seed.
+
+    A sequential continuation with a secant predictor on a coarse slope grid (step
+    `coarse_step`) from `seed` at `seed_psi` (default: the 3-degree gait of `family`)
+    provides initial guesses; then one batched (`vmap`) Newton solve at all `psis`.
+    Not jittable as a whole (host loop over the coarse grid); each solve is.
+    """
+    model = CompassGait() if model is None else model
+    psis = np.atleast_1d(np.asarray(psis, float))
+    z_seed = np.asarray(SEEDS_3DEG[family] if seed is None else seed, float)
+    lo, hi = min(psis.min(), seed_psi), max(psis.max(), seed_psi)
+    grid_up = np.arange(seed_psi, hi + coarse_step, coarse_step)
+    grid_dn = np.arange(seed_psi, lo - coarse_step, -coarse_step)
+    known = {}
+    for grid in (grid_up, grid_dn):
+        zs = []
+        for p in grid:
+            guess = z_seed if len(zs) == 0 else (zs[-1] if len(zs) == 1 else 2 * zs[-1] - zs[-2])
+            fp = _fixed_point_jit(with_slope(model, p), jnp.asarray(guess), 1, config=config)
+            if fp.result != RESULTS.successful:
+                break
+            zs.append(np.asarray(fp.z))
+            known[float(p)] = zs[-1]
+    ps = np.array(sorted(known))
+    Z = np.stack([known[p] for p in ps])
+    guesses = np.stack([np.interp(psis, ps, Z[:, j]) for j in range(Z.shape[1])], axis=1)
+    fps = _fixed_points_batch(model, jnp.asarray(psis), jnp.asarray(guesses), 1, config)
+    # Outside the continued range the guess is an extrapolation: flag as not converged.
+    inside = (psis >= ps.min() - 1e-12) & (psis <= ps.max() + 1e-12)
+    code = jax.vmap(lambda i, r: RESULTS.where(i, r, RESULTS.not_converged))(
+        jnp.asarray(inside), fps.result)
+    return Family(jnp.asarray(psis), fps.z, fps.periods[:, 0], code)
+
+
+# ---- period doubling --------------------------------------------------------------------
+def _flip_function(model, psi, z0, config, k=1):
+    fp = _fixed_point_jit(with_slope(model, psi), jnp.asarray(z0), k, config=config)
+    J = _jacobian_jit(with_slope(model, psi), fp.z, k, config)
+    return float(jnp.linalg.det(jnp.eye(J.shape[0]) + J)), np.asarray(fp.z), fp.result
+
+
+_jacobian_jit = _poincare.jacobian_jit
+
+
+class PeriodDoubling(eqx.Module):
+    """A flip bifurcation: `psi` (rad), `z` (the period-1 gait there), `multipliers`
+    (Poincare, at `psi`; one of them is $-1$), `bracket` (rad), `iterations`."""
+
+    psi: float
+    z: np.ndarray
+    multipliers: np.ndarray
+    bracket: tuple
+    iterations: int
+
+
+def period_doubling_slope(psi_lo, psi_hi, z_lo, *, model=None, k=1, tol=math.radians(1e-5),
+                          config=DEFAULT_CONFIG, max_iter=60):
+    """Slope in `[psi_lo, psi_hi]` where a multiplier of the period-`k` gait crosses $-1$.
+
+    $f(\\psi) = \\det(I + J(\\psi))$ ($J$ the Jacobian of $P^k$ at the fixed point) is
+    smooth and changes sign where a real multiplier crosses $-1$; the root is found by
+    bisection safeguarded regula falsi (Illinois) to `tol` (default 1e-5 degrees),
+    continuing the fixed point from `z_lo` (a gait at `psi_lo`).
+    """
+    model = CompassGait() if model is None else model
+    fa, za, ra = _flip_function(model, psi_lo, z_lo, config, k)
+    fb, zb, rb = _flip_function(model, psi_hi, za, config, k)
+    if ra != RESULTS.successful or rb != RESULTS.successful:
+        raise ValueError("period_doubling_slope: no period-k gait at the bracket ends")
+    if not fa * fb < 0:
+        raise ValueError(f"no sign change of det(I+J) in [{psi_lo}, {psi_hi}]: {fa}, {fb}")
+    a, b = psi_lo, psi_hi
+    side = 0
+    it = 0
+    while b - a > tol and it < max_iter:
+        c = (a * fb - b * fa) / (fb - fa)
+        if not (a < c < b) or it % 3 == 2:
+            c = 0.5 * (a + b)
+        zc_guess = za + (zb - za) * (c - a) / (b - a)
+        fc, zc, res = _flip_function(model, c, zc_guess, config, k)
+        if fc * fb < 0:
+            a, fa, za = b, fb, zb
+            b, fb, zb = c, fc, zc
+            side = 0
+        else:
+            b, fb, zb = c, fc, zc
+            if side == 1:
+                fa *= 0.5
+            side = 1
+        if a > b:
+            a, b, fa, fb, za, zb = b, a, fb, fa, zb, za
+        it += 1
+    psi = 0.5 * (a + b)
+    _, z, _ = _flip_function(model, psi, za, config, k)
+    J = _jacobian_jit(with_slope(model, psi), jnp.asarray(z), k, config)
+    ev = np.asarray(_sort(jnp.linalg.eigvals(J)))
+    return PeriodDoubling(psi, z, ev, (a, b), it)
+
+
+# ---- period-k orbits ---------------------------------------------------------------------
+class PeriodKOrbit(eqx.Module):
+    """A fixed point of $P^k$: `z` (its first point), `orbit` (k, 2n-1) the k points,
+    `periods` (k,), `multipliers` of $P^k$ (Poincare, and by finite differences),
+    `residual`, `result`, `minimal_period` (the smallest j with $P^j(z) = z$)."""
+
+    z: np.ndarray
+    orbit: np.ndarray
+    periods: np.ndarray
+    multipliers: np.ndarray
+    multipliers_fd: np.ndarray
+    residual: float
+    result: RESULTS
+    minimal_period: int
+
+
+def settle(model, z0, num_steps=400, config=FAST_CONFIG):
+    """Post-impact section coordinates after `num_steps` steps from `z0` (None if the
+    walker fell): a seed for period-k searches on an attractor."""
+    sim = _simulate_jit(model, model.section_to_state(jnp.asarray(z0, float)), num_steps,
+                        config=config)
+    if sim.result != RESULTS.successful:
+        return None
+    return np.asarray(model.state_to_section(sim.steps.x_plus[-1]))
+
+
+_simulate_jit = simulate  # already jitted
+
+
+def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG):
+    """Newton on $P^k(z) = z$ from `z0` (e.g. from `settle`), with multipliers of $P^k$
+    by autodiff and by central finite differences."""
+    fp = _fixed_point_jit(model, jnp.asarray(z0, float), k, config=config)
+    z = np.asarray(fp.z)
+    orbit = [z]
+    zz = jnp.asarray(z)
+    for _ in range(k - 1):
+        zz = _step_map_jit(model, zz, 1, config).z_next
+        orbit.append(np.asarray(zz))
+    orbit = np.stack(orbit)
+    J = _jacobian_jit(model, fp.z, k, config)
+    Jfd = finite_difference_jacobian_jit(model, fp.z, k, 1e-6, config)
+    minimal = k
+    for j in range(1, k):
+        if k % j == 0 and np.max(np.abs(orbit[j] - orbit[0])) < 1e-7:
+            minimal = j
+            break
+    return PeriodKOrbit(z, orbit, np.asarray(fp.periods), np.asarray(_sort(jnp.linalg.eigvals(J))),
+                        np.asarray(_sort(jnp.linalg.eigvals(Jfd))), float(fp.residual), fp.result,
+                        minimal)
+
+
+_step_map_jit = _poincare.step_map_jit
+
+
+# ---- bifurcation diagram ---------------------------------------------------------------
+class BifurcationDiagram(eqx.Module):
+    """Long simulations over slopes.
+
+    - `psi` (B,): slopes (rad).
+    - `periods` (B, num_record): step periods of the last `num_record` steps (NaN-free;
+      zero after a fall).
+    - `fell` (B,): the walker did not complete all steps.
+    - `result` (B,): first failure code per slope.
+    - `period_pattern` (B,): `detect_period` of the recorded step periods: 1, 2, 4, ...
+      steps per repetition, 0 if aperiodic (chaotic or not settled), -1 where it fell.
+    """
+
+    psi: np.ndarray
+    periods: np.ndarray
+    fell: np.ndarray
+    result: np.ndarray
+    period_pattern: np.ndarray
+
+
+@filter_jit
+def _long_runs(model, psis, x0s, num_steps, num_record, config):
+    def one(p, x0):
+        sim = simulate(with_slope(model, p), x0, num_steps, config=config)
+        return sim.steps.period[-num_record:], sim.result
+
+    return jax.vmap(one)(psis, x0s)
+
+
+def count_distinct(periods, tol=1e-6):
+    """Number of distinct values in `periods` (clusters closer than `tol`)."""
+    p = np.sort(np.asarray(periods))
+    return int(1 + np.sum(np.diff(p) > tol))
+
+
+def bifurcation_diagram(psis, zs, *, model=None, num_transient=300, num_record=64,
+                        perturbation=1e-4, config=FAST_CONFIG, chunk=None, mesh=None):
+    """Simulate from the period-1 gaits `zs` at slopes `psis` (rad) for
+    `num_transient + num_record` steps (batched with `vmap`) and keep the step periods
+    of the last `num_record`.
+
+    The start is the gait plus `perturbation` on $\\dot q_2$, so that unstable period-1
+    gaits (past the flip) leave towards the attractor. Default tolerance: `FAST_CONFIG`
+    (rtol = atol = 1e-8). `chunk`: optional batch size (memory). Each chunk is padded to
+    a multiple of the device count and split over the devices of `mesh` (default: all
+    local devices; `vhcjax._batching`).
+    """
+    model = CompassGait() if model is None else model
+    psis = np.asarray(psis, float)
+    zs = np.asarray(zs, float)
+    x0s = np.stack([np.asarray(with_slope(model, p).section_to_state(jnp.asarray(z)))
+                    for p, z in zip(psis, zs)])
+    x0s[:, -1] += perturbation
+    n = len(psis)
+    chunk = n if chunk is None else chunk
+    P, R = [], []
+    for i in range(0, n, chunk):
+        sl = slice(i, min(i + chunk, n))
+        ps, xs = psis[sl], x0s[sl]
+        k = len(ps)
+        pad = round_to_devices(k, mesh) - k
+        ps = np.concatenate([ps, np.repeat(ps[-1:], pad)])
+        xs = np.concatenate([xs, np.repeat(xs[-1:], pad, axis=0)])
+        p, r = _long_runs(model, *shard_batch((jnp.asarray(ps), jnp.asarray(xs)), mesh),
+                          num_transient + num_record, num_record, config)
+        P.append(np.asarray(p)[:k])
+        R.append(np.asarray(r._value)[:k])
+    periods = np.concatenate(P)
+    codes = np.concatenate(R)
+    fell = codes != int(RESULTS.successful._value)
+    nd = np.array([-1 if f else detect_period(pp) for pp, f in zip(periods, fell)])
+    return BifurcationDiagram(psis, periods, fell, codes, nd)
+
+
+def detect_period(periods, tol=1e-5, candidates=(1, 2, 4, 8, 16, 32)):
+    """Smallest p in `candidates` with `periods[i + p] == periods[i]` (within `tol` s)
+    for all recorded i; 0 if none (aperiodic, e.g. chaotic, or not settled)."""
+    periods = np.asarray(periods)
+    for p in candidates:
+        if p < len(periods) and np.max(np.abs(periods[p:] - periods[:-p])) < tol:
+            return p
+    return 0
+
+
+def period_doubling_slopes_from_diagram(diagram):
+    """Slopes (rad) where the detected step-period pattern (`detect_period`) first reaches
+    2, 4, 8, ... (midpoints between neighbouring slopes), from a `BifurcationDiagram`: a
+    simulation-only estimate of the cascade, as coarse as the slope grid."""
+    per = np.asarray(diagram.period_pattern)
+    out = []
+    target = 2
+    for i in range(1, len(per)):
+        if per[i] >= target and 0 < per[i - 1] < target:
+            out.append(0.5 * (diagram.psi[i - 1] + diagram.psi[i]))
+            target *= 2
+    return out
+
+
+def period2_branch(model, pd, psis, config=DEFAULT_CONFIG, amplitudes=(3e-3, 1e-2, 3e-2)):
+    """Continue the period-2 gait born at the flip `pd` (a `PeriodDoubling`) over the
+    slopes `psis` (rad, increasing, all past the flip).
+
+    The first solve starts from the period-1 gait at the flip displaced along the flip
+    eigenvector (several trial amplitudes; a solution that is the period-1 gait again is
+    rejected), then secant continuation. Stops where Newton fails or the orbit collapses.
+    **Returns:** dict with `psi` (m,), `z` (m, 3), `periods` (m, 2), `max_abs` (m,) and
+    `stable` (m,) from the multipliers of $P^2$, and `flip_psi`: the slope where a
+    multiplier of $P^2$ crosses $-1$ (period 2 -> 4), located to 1e-5 degrees, or None.
+    """
+    psis = np.asarray(psis, float)
+    if len(psis) == 0:
+        return None
+    J = _jacobian_jit(with_slope(model, pd.psi), jnp.asarray(pd.z), 1, config)
+    ev, V = np.linalg.eig(np.asarray(J))
+    v = np.real(V[:, np.argmin(np.abs(ev + 1))])
+    v = v / np.linalg.norm(v)
+    out_psi, out_z, out_T, out_mx = [], [], [], []
+    zs = []
+    for i, p in enumerate(psis):
+        m = with_slope(model, p)
+        if i == 0:
+            trials = [pd.z + s * v for s in amplitudes]
+        else:
+            trials = [zs[-1] if len(zs) == 1 else zs[-1] + (zs[-1] - zs[-2])
+                      * (p - out_psi[-1]) / (out_psi[-1] - out_psi[-2])]
+        found = None
+        for guess in trials:
+            fp = _fixed_point_jit(m, jnp.asarray(guess), 2, config=config)
+            if fp.result != RESULTS.successful:
+                continue
+            z1 = np.asarray(_step_map_jit(m, fp.z, 1, config).z_next)
+            if np.max(np.abs(z1 - np.asarray(fp.z))) > 1e-6:
+                found = fp
+                break
+        if found is None:
+            break
+        zs.append(np.asarray(found.z))
+        Jk = _jacobian_jit(m, found.z, 2, config)
+        out_psi.append(p)
+        out_z.append(zs[-1])
+        out_T.append(np.asarray(found.periods))
+        out_mx.append(float(np.max(np.abs(np.linalg.eigvals(np.asarray(Jk))))))
+    if not out_psi:
+        return None
+    mx = np.asarray(out_mx)
+    stable = mx < 1.0
+    flip = None
+    idx = np.where(stable[:-1] & ~stable[1:])[0]
+    if len(idx):
+        i = int(idx[0])
+        try:
+            flip = period_doubling_slope(out_psi[i], out_psi[i + 1], out_z[i], model=model,
+                                         k=2, config=config).psi
+        except ValueError:
+            flip = None
+    return {"psi": np.asarray(out_psi), "z": np.stack(out_z), "periods": np.stack(out_T),
+            "max_abs": mx, "stable": stable, "flip_psi": flip}
+
+
+# ---- output helpers for the `gait` command (JSON fields and sweep CSV columns) -----------
+CSV_COLUMNS = ["mult1_re", "mult1_im", "mult2_re", "mult2_im", "mult3_re", "mult3_im",
+               "max_abs_multiplier", "stable"]
+
+
+def stability_json(gm, index=None):
+    """JSON fields `multipliers` (transverse linearization), `multipliers_poincare` (each
+    a list of `[re, im]`) and `stable` from a (possibly batched, then `index`)
+    `GaitMultipliers`."""
+    tr, pc, st = np.asarray(gm.transverse), np.asarray(gm.poincare), np.asarray(gm.stable)
+    if index is not None:
+        tr, pc, st = tr[index], pc[index], st[index]
+    return {"multipliers": [[float(e.real), float(e.imag)] for e in tr],
+            "multipliers_poincare": [[float(e.real), float(e.imag)] for e in pc],
+            "stable": bool(st)}
+
+
+def stability_csv_row(gm, index=None):
+    """Values for `CSV_COLUMNS` (transverse multipliers, by modulus, descending)."""
+    tr = np.asarray(gm.transverse)
+    tr = tr if index is None else tr[index]
+    row = []
+    for e in tr:
+        row += [float(e.real), float(e.imag)]
+    mx = float(np.max(np.abs(tr)))
+    return row + [mx, bool(mx < 1.0)]
+
+
+def add_stability_columns(model, gaits, psis, rows):
+    """Add the `CSV_COLUMNS` values to sweep rows (dicts) of a batched `Gait`, from one
+    batched `family_multipliers` call; rows whose gait failed get empty values."""
+    z = jax.vmap(model.state_to_section)(jnp.asarray(gaits.x_plus))
+    gm = family_multipliers(model, jnp.asarray(psis, float), z)
+    ok = np.asarray(gm.result._value) == 0
+    for i, row in enumerate(rows):
+        good = ok[i] and row.get("result") == "successful"
+        vals = stability_csv_row(gm, i) if good else [""] * len(CSV_COLUMNS)
+        row.update(dict(zip(CSV_COLUMNS, vals)))
