@@ -17,6 +17,9 @@ import argparse
 import json
 import math
 import os
+
+# Compile times are those of a first run: without the persistent compilation cache.
+os.environ.setdefault("VHCJAX_CACHE_DIR", "off")
 import platform
 import sys
 import time

@@ -2,7 +2,7 @@
 transverse linearization and the autodiff Poincare Jacobian) against scipy (central finite
 differences of a `solve_ivp` step map, one slope after another).
 
-The gaits (fixed points) are computed first by `vhcjax.stability._multipliers.period1_family` and are
+The gaits (fixed points) are computed first by `vhcjax.period1_family` and are
 not timed. vhcjax: `family_multipliers` on all B slopes at once (vmap), compile time
 reported separately from the run time (best of `--repeats`). scipy: for each of a subset
 of the slopes (`--scipy-slopes`), the 3x3 Jacobian of the step map by central differences
@@ -17,6 +17,9 @@ the common slopes) is reported too.
 import argparse
 import json
 import os
+
+# Compile times are those of a first run: without the persistent compilation cache.
+os.environ.setdefault("VHCJAX_CACHE_DIR", "off")
 import platform
 import sys
 import time

@@ -29,9 +29,8 @@ def _release_compiled_code():
     long test session that compiles hundreds of programs can exhaust the kernel's
     per-process map limit (vm.max_map_count, 65530 by default) and abort inside the
     compiler. Past 30,000 maps, JAX's caches are cleared between test modules (below
-    that, modules share what earlier ones compiled), with the programs vhcjax keeps itself.
+    that, modules share what earlier ones compiled).
     """
     yield
     if _memory_maps() > 30_000:
-        from vhcjax import _compile
-        _compile.clear_caches()
+        vhcjax.clear_caches()

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax.gait import _search as _gait
+from vhcjax import gait as G
 from vhcjax.cli import main
 
 
@@ -24,7 +24,7 @@ def test_gait_json(capsys):
             "residual"} <= set(out)
     assert out["result"] == "successful" and out["family"] == "stable" and out["method"] == "vhc"
     assert set(out["params"]) == set("abcdefgh") | {"T", "E0"}
-    g = _gait.find_gait(vj.CompassGait(), "stable", guess=(0.2, -1.0))
+    g = G.find_gait(vj.CompassGait(), "stable", guess=(0.2, -1.0))
     np.testing.assert_allclose(out["x0"], np.asarray(g.x_plus), atol=1e-14)
     # x0 is (a, e, b, f) and the thesis (7.5) to its printed digits
     p = out["params"]
@@ -103,15 +103,3 @@ def test_compiled_search_kept_on_disk_and_read_back(tmp_path):
     assert second.returncode == 0, second.stderr[-2000:]
     assert second.stderr.count("Persistent compilation cache hit for 'jit__search'") == 2
     assert second.stdout == first.stdout
-
-
-def test_command_enables_the_cache_only_when_asked(monkeypatch, tmp_path):
-    from vhcjax import _compile
-    calls = []
-    monkeypatch.setattr(_compile, "enable_compilation_cache", calls.append)
-    monkeypatch.delenv("VHCJAX_CACHE_DIR", raising=False)
-    assert main(["gait", "--slope-deg", "40"]) == 2  # bad input: stops before any work
-    assert calls == []
-    monkeypatch.setenv("VHCJAX_CACHE_DIR", str(tmp_path))
-    assert main(["gait", "--slope-deg", "40"]) == 2
-    assert calls == [str(tmp_path)]

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax.gait import _search as _gait
+from vhcjax.gait import _problem1
 from vhcjax import trig
 RNG = np.random.default_rng(7)
 
@@ -49,12 +49,12 @@ def test_each_angle_evaluated_once_per_field_evaluation(polynomial):
     (`round-nearest-even`) twice, once per angle."""
     import re
 
-    from vhcjax.gait import _search as _gait
+    from vhcjax.gait import _problem1
     model = vj.CompassGait()
     y, E0, th = jnp.array([-0.25, 0.5, 0.0]), jnp.array(1.0), jnp.array(0.2)
 
     def field(m, th, y, E0):
-        return _gait._phi_field(th, y, (m, E0, 1.0))
+        return _problem1._phi_field(th, y, (m, E0, 1.0))
 
     def jac(m, th, y, E0):
         return jax.jacfwd(lambda yy: field(m, th, yy, E0))(y)

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax.gait import _search as _gait
+from vhcjax import gait as G
 from vhcjax.gait import _vhc as _vhc
 def thesis_f0(p, E0, theta, phi, Dphi):
     """Appendix C.3, `function Dx = f0(theta, x, E0)`, copied term by term."""
@@ -80,9 +80,9 @@ def test_impact_relations_and_energy_quadratic_match_thesis(model):
     rng = np.random.default_rng(1)
     p = {k: float(v) for k, v in model.parameters().items()}
     psi = float(model.psi)
-    fh = jax.jit(lambda a, b, d: _gait.velocity_relations(model, a, b, d))
-    abc = jax.jit(lambda a, b: _gait.quadratic_coefficients(model, a, b))
-    roots = jax.jit(lambda a, b: [_gait.solve_for_d(model, a, b, f) for f in ("stable", "unstable")])
+    fh = jax.jit(lambda a, b, d: G.velocity_relations(model, a, b, d))
+    abc = jax.jit(lambda a, b: G.quadratic_coefficients(model, a, b))
+    roots = jax.jit(lambda a, b: [G.solve_for_d(model, a, b, f) for f in ("stable", "unstable")])
     for _ in range(20):
         a, b, d = rng.uniform(0.1, 0.3), rng.uniform(-1.5, -0.8), rng.uniform(-2.0, -1.0)
         f, h = fh(a, b, d)

@@ -11,7 +11,11 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 from .models import CompassGait as CompassGait
-from ._compile import clear_caches as clear_caches, enable_compilation_cache as enable_compilation_cache
+from ._cache import (
+    clear_caches as clear_caches,
+    default_cache_dir as default_cache_dir,
+    enable_compilation_cache as enable_compilation_cache,
+)
 from .hybrid import (
     DEFAULT_CONFIG as DEFAULT_CONFIG,
     FAST_CONFIG as FAST_CONFIG,
@@ -111,3 +115,7 @@ from .gait import (  # noqa: E402
     sweep as sweep,
     vhc_search as vhc_search,
 )
+
+from ._cache import enable_default_cache as _enable_default_cache  # noqa: E402
+
+_enable_default_cache()

@@ -14,12 +14,19 @@ spans `jax.devices()` (all devices of all hosts) and the same code runs unchange
 import os
 from concurrent.futures import ThreadPoolExecutor
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
-from ._compile import filter_jit
+
+
+def bucket_size(n, minimum=8):
+    """Padded size of a batch of `n`: the smallest power of two that is at least `n` and
+    `minimum`. Batches padded to these few sizes share compiled programs (tracing and
+    compiling cost far more than running the padding members)."""
+    return max(minimum, 1 << (int(n) - 1).bit_length())
 
 
 def default_mesh(devices=None):
@@ -35,7 +42,7 @@ def _pad(x, n_pad):
     return jnp.concatenate([x, jnp.repeat(x[-1:], n_pad, axis=0)], axis=0)
 
 
-def batched_map(fn, *args, mesh=None, bucket=None):
+def batched_map(fn, *args, mesh=None):
     """`vmap(fn)(*args)` sharded along the leading axis over `mesh`.
 
     **Arguments:**
@@ -44,8 +51,6 @@ def batched_map(fn, *args, mesh=None, bucket=None):
     - `args`: pytrees of arrays with a common leading batch axis.
     - `mesh`: a `jax.sharding.Mesh` with a `"batch"` axis; `None` uses all local devices
       (and no sharding machinery at all if there is only one).
-    - `bucket`: if given, pad the batch up to a multiple of `bucket` as well, so that
-      nearby batch sizes share one compiled program.
 
     **Returns:** the pytree of results with the original batch size.
     """
@@ -53,8 +58,7 @@ def batched_map(fn, *args, mesh=None, bucket=None):
     n = leaves[0].shape[0]
     mesh = default_mesh() if mesh is None else mesh
     n_dev = mesh.devices.size
-    multiple = n_dev if bucket is None else int(np.lcm(n_dev, bucket))
-    n_total = -(-n // multiple) * multiple
+    n_total = -(-n // n_dev) * n_dev
     padded = jax.tree_util.tree_map(lambda x: _pad(jnp.asarray(x), n_total - n), args)
     if n_dev > 1:
         sharding = NamedSharding(mesh, PartitionSpec("batch"))
@@ -69,7 +73,7 @@ _cache = {}
 def _vmapped(fn):
     # One compiled program per function object (jit caches per input shape/sharding).
     if fn not in _cache:
-        _cache[fn] = filter_jit(jax.vmap(fn))
+        _cache[fn] = eqx.filter_jit(jax.vmap(fn))
     return _cache[fn]
 
 

@@ -1,6 +1,5 @@
 """What the subcommands share: model flags, input checks, JSON output, progress bars."""
 
-import argparse
 import json
 import math
 import sys

@@ -6,7 +6,6 @@ bad input becomes a one-line message and exit status 2 instead of a traceback.
 
 import argparse
 import importlib
-import os
 import sys
 
 from ._common import CLIError
@@ -37,10 +36,6 @@ def build_parser():
 def main(argv=None):
     parser = build_parser()
     args = parser.parse_args(argv)
-    if os.environ.get("VHCJAX_CACHE_DIR"):  # keep compiled programs on disk (README)
-        from .._compile import enable_compilation_cache
-
-        enable_compilation_cache(os.environ["VHCJAX_CACHE_DIR"])
     try:
         return int(args.func(args) or 0)
     except CLIError as e:

@@ -2,7 +2,6 @@
 
 import math
 
-from .._compile import filter_jit
 from ._common import CLIError, add_model_flags, check_finite, model_from_args, print_json, progress
 
 STABLE_SEED = (0.2186688, -1.09238359, -0.37737395)  # stable 3-degree gait (Newton seed)
@@ -31,7 +30,7 @@ def _gait(args):
 
     check_finite("--gait", *args.gait)
     model = model_from_args(args)
-    fp = filter_jit(fixed_point)(model, jnp.asarray(args.gait, float))
+    fp = eqx.filter_jit(fixed_point)(model, jnp.asarray(args.gait, float))
     if result_names(fp.result) != "successful":
         raise CLIError(f"no gait found from --gait {args.gait} at slope {args.slope_deg} deg "
                        f"({result_names(fp.result)}); give a better seed")

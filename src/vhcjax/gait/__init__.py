@@ -2,36 +2,13 @@
 continuation and slope sweeps; the reduced dynamics of a virtual holonomic constraint.
 """
 
-from ._search import (
-    batch_jacobian as batch_jacobian,
-    BoundaryData as BoundaryData,
-    complete_guess as complete_guess,
-    complete_guess_jit as complete_guess_jit,
-    continue_to_model as continue_to_model,
-    damped_newton as damped_newton,
-    damped_newton_batch as damped_newton_batch,
-    energy_gap as energy_gap,
+from ._gait import (
     FAMILIES as FAMILIES,
     family_sign as family_sign,
-    find_gait as find_gait,
-    find_gaits as find_gaits,
     Gait as Gait,
-    impact_configuration as impact_configuration,
-    impact_velocity_matrix as impact_velocity_matrix,
     METHODS as METHODS,
-    quadratic_coefficients as quadratic_coefficients,
-    reference_guess as reference_guess,
-    reference_model as reference_model,
-    shooting_search as shooting_search,
-    solve_for_d as solve_for_d,
     SUCCESS_TOL as SUCCESS_TOL,
-    sweep as sweep,
-    Sweep as Sweep,
-    velocity_relations as velocity_relations,
-    vhc_boundary as vhc_boundary,
     VHC_CONFIG as VHC_CONFIG,
-    vhc_residual as vhc_residual,
-    vhc_search as vhc_search,
 )
 
 from ._vhc import (
@@ -45,6 +22,44 @@ from ._vhc import (
     singularity_terms as singularity_terms,
     theta_dot_squared as theta_dot_squared,
     theta_dynamics_coefficients as theta_dynamics_coefficients,
+)
+
+from ._problem1 import (
+    BoundaryData as BoundaryData,
+    energy_gap as energy_gap,
+    impact_configuration as impact_configuration,
+    impact_velocity_matrix as impact_velocity_matrix,
+    quadratic_coefficients as quadratic_coefficients,
+    solve_for_d as solve_for_d,
+    velocity_relations as velocity_relations,
+    vhc_boundary as vhc_boundary,
+    vhc_residual as vhc_residual,
+    vhc_search as vhc_search,
+)
+
+from ._shooting import (
+    complete_guess as complete_guess,
+    complete_guess_jit as complete_guess_jit,
+    shooting_search as shooting_search,
+)
+
+from ._dispatch import (
+    reference_guess as reference_guess,
+    reference_model as reference_model,
+)
+
+from ._continuation import (
+    continue_to_model as continue_to_model,
+)
+
+from ._find import (
+    find_gait as find_gait,
+    find_gaits as find_gaits,
+)
+
+from ._sweep import (
+    Sweep as Sweep,
+    sweep as sweep,
 )
 
 from ._vhc_n import (

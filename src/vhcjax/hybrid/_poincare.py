@@ -13,7 +13,6 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from .._compile import filter_jit
 from ._simulate import DEFAULT_CONFIG, step_unchecked
 from .._results import RESULTS
 
@@ -117,7 +116,7 @@ def fixed_point(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, config=
 
 
 # Shared jitted entry points: one compile cache per function for the whole library.
-step_map_jit = filter_jit(step_map)
-jacobian_jit = filter_jit(jacobian)
-multipliers_jit = filter_jit(multipliers)
-fixed_point_jit = filter_jit(fixed_point)
+step_map_jit = eqx.filter_jit(step_map)
+jacobian_jit = eqx.filter_jit(jacobian)
+multipliers_jit = eqx.filter_jit(multipliers)
+fixed_point_jit = eqx.filter_jit(fixed_point)

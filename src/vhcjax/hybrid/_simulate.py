@@ -16,7 +16,6 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from .._compile import filter_jit
 from ._event_solve import solve_to_event
 from .. import trig
 from .._results import RESULTS
@@ -338,12 +337,12 @@ def simulate(model, x0, num_steps, *, config=DEFAULT_CONFIG, dense_points=0, thr
 
 # The public entry points are jitted once here (models carry array leaves, so one
 # compilation serves every parameter value); every caller shares these caches.
-step = filter_jit(step)
-simulate = filter_jit(simulate)
+step = eqx.filter_jit(step)
+simulate = eqx.filter_jit(simulate)
 simulate_jit = simulate
 
 
-@filter_jit
+@eqx.filter_jit
 def _simulate_many(model, x0, num_steps, config):
     return jax.vmap(lambda x: _simulate(model, x, num_steps, config))(x0)
 

@@ -29,9 +29,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..models import CompassGait
-from ..gait import Gait, Sweep, find_gaits
+from ..gait import Sweep, find_gaits
 from ..hybrid import DEFAULT_CONFIG, jacobian_jit, simulate, step_map_jit
-from .._results import RESULTS, result_names
+from .._results import result_names
 from ..stability import (
     bifurcation_diagram,
     family_multipliers,

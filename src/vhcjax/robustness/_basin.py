@@ -17,7 +17,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compile import filter_jit
 from ._bisection import bisect_threshold
 from ..hybrid import FAST_CONFIG
 from ._recovery import CONVERGED, recover
@@ -28,7 +27,7 @@ BASIN_CONFIG = FAST_CONFIG
 """Swing integration used for basin maps: Tsit5, rtol = atol = 1e-8 (`FAST_CONFIG`)."""
 
 
-@filter_jit
+@eqx.filter_jit
 def _recover_chunk(model, z, z_star, num_steps, tol, config):
     x0 = jax.vmap(model.section_to_state)(z)
     return recover(model, x0, model.section_to_state(z_star), num_steps, tol=tol, config=config)

@@ -14,7 +14,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compile import filter_jit
 from ..hybrid import DEFAULT_CONFIG
 from ..hybrid import jacobian
 from ._recovery import recover
@@ -119,12 +118,12 @@ def contraction(model, z_star, *, num_perturbations=32, scale=1e-3, num_steps=30
     )
 
 
-@filter_jit
+@eqx.filter_jit
 def _jacobian_jit(model, z, config):
     return jacobian(model, z, 1, config)
 
 
-@filter_jit
+@eqx.filter_jit
 def _recover_jit(model, x0, x_star, num_steps, config):
     # tol=0: nobody "converges", every recovery runs all steps (a full error history).
     return recover(model, x0, x_star, num_steps, tol=0.0, config=config,

@@ -28,7 +28,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compile import filter_jit
 from ._bisection import bisect_threshold
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, StepResult, classify_solve, flow
 from ._recovery import CONVERGED, recover
@@ -132,7 +131,7 @@ def pulse_step(model, x0, t_push, force, duration, config=DEFAULT_CONFIG, alive=
 
 
 # ---- linear sensitivity, way 1: autodiff through the pushed step -------------------------
-@filter_jit
+@eqx.filter_jit
 def push_sensitivity_autodiff(model, x_star, period, phases, config=DEFAULT_CONFIG):
     """$\\partial x^+/\\partial P$ (shape `(len(phases), 2n, 2)`) of the post-impact state
     after a pushed step, per phase, by forward-mode autodiff at $P = 0$."""
@@ -145,7 +144,7 @@ def push_sensitivity_autodiff(model, x_star, period, phases, config=DEFAULT_CONF
 
 
 # ---- linear sensitivity, way 2: transverse linearization + input term -------------------
-@filter_jit
+@eqx.filter_jit
 def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-11,
                                 atol=1e-11):
     """$\\partial\\zeta^+/\\partial P$ (shape `(len(phases), 2n-1, 2)`): the transverse
@@ -184,7 +183,7 @@ def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-
 
 
 # ---- largest push survived -----------------------------------------------------------------
-@filter_jit
+@eqx.filter_jit
 def push_recovery(model, x_star, period, phases, angles, magnitudes, num_steps=30, tol=1e-4,
                   duration=0.0, config=FAST_CONFIG):
     """Recovery after a push of magnitude `magnitudes` (impulse in N s, or force in N when

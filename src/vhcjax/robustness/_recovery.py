@@ -13,7 +13,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._compile import filter_jit
 from .. import trig
 from ..hybrid import FAST_CONFIG, step_unchecked
 from .._results import RESULTS
@@ -146,7 +145,7 @@ def _recover(model, x0, x_star, num_steps, tol, cycle_tol, max_period, config, f
     return Recovery(label, steps, period, result, x, dist, times)
 
 
-recover_jit = filter_jit(recover)
+recover_jit = eqx.filter_jit(recover)
 
 
 def label_names(label):

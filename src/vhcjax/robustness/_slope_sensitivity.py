@@ -17,7 +17,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compile import filter_jit
 from ..hybrid import DEFAULT_CONFIG
 
 
@@ -63,7 +62,7 @@ class SlopeSensitivity(eqx.Module):
     djacobian: jax.Array
 
 
-@filter_jit
+@eqx.filter_jit
 def _implicit(model, z, config):
     # One second-order forward trace over u = (z, psi): the first derivatives of all
     # outputs and the derivatives of the step-map Jacobian J = dP/dz in every direction.

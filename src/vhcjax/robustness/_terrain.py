@@ -17,7 +17,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._compile import filter_jit
 from ._bisection import bisect_threshold
 from ..models import CompassGait
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, step_unchecked
@@ -56,7 +55,7 @@ def _first_step_fn(model, h, config):
     return first
 
 
-@filter_jit
+@eqx.filter_jit
 def terrain_recovery(model, x_star, h, num_steps=30, tol=1e-4, config=FAST_CONFIG,
                      stop_when_converged=True):
     """Walk from the gait's post-impact state `x_star` onto a floor step of height `h`
@@ -110,7 +109,7 @@ class GaitSensitivity(eqx.Module):
     c: jax.Array
 
 
-@filter_jit
+@eqx.filter_jit
 def gait_sensitivity_norm(model, x_star, num_steps=40, config=DEFAULT_CONFIG):
     """Gait sensitivity norm (Hobbelen and Wisse 2007) for floor-height disturbances with
     step time as the gait indicator, from the linearized step-to-step map with the floor

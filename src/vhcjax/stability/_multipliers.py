@@ -24,14 +24,13 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._compile import filter_jit
 from ..models import CompassGait
 from ..hybrid import solve_to_event
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, ode_solver, step_unchecked, simulate
 from .. import hybrid as _poincare
 from ..hybrid import fixed_point, jacobian, step_map
 from .._results import RESULTS
-from .._batching import MAX_DISPATCH, host_workers, in_chunks, round_to_devices, shard_batch
+from .._batching import bucket_size, MAX_DISPATCH, host_workers, in_chunks, round_to_devices, shard_batch
 from ._transverse import TransverseLinearization, transverse_linearization
 
 #: Stable and unstable period-1 gaits of the default compass gait at 3 degrees
@@ -86,7 +85,7 @@ def _gait_multipliers(model, z, config=DEFAULT_CONFIG):
     return GaitMultipliers(tl.multipliers, pm, mx, mx < 1.0, sr.period, sr.x_minus, code, tl)
 
 
-@filter_jit
+@eqx.filter_jit
 def _family_multipliers_padded(model, psis, zs, config):
     return jax.vmap(lambda p, z: _gait_multipliers(with_slope(model, p), z, config))(psis, zs)
 
@@ -95,16 +94,16 @@ _MAX_CHUNK = MAX_DISPATCH
 
 
 def _bucket(n):
-    """Batch sizes that share a compilation: 8, 64, then multiples of 256."""
-    return 8 if n <= 8 else 64 if n <= 64 else 256 * -(-n // 256)
+    """Padded batch size: a power of two up to `_MAX_CHUNK`, then whole chunks."""
+    return bucket_size(n) if n <= _MAX_CHUNK else _MAX_CHUNK * -(-n // _MAX_CHUNK)
 
 
 def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, mesh=None):
     """`gait_multipliers` for many slopes in one batched (`vmap`) call.
 
     `psis` (B,) in rad, `zs` (B, 2n-1) the gaits there. Returns a batched
-    `GaitMultipliers`. The batch is padded (copies of the first member) to 8, 64 or a
-    multiple of 256, so that every batch size up to the bucket shares one compilation:
+    `GaitMultipliers`. The batch is padded (copies of the first member) to a power of two
+    (`_batching.bucket_size`) or a multiple of 256, so that nearby sizes share one compilation:
     tracing the transverse linearization through diffrax costs far more than running it;
     batches above 256 run as chunks of 256, one per CPU core at a time
     (`_sharding.host_workers`).
@@ -141,7 +140,7 @@ def gait_multipliers(model, z, config=DEFAULT_CONFIG):
     return jax.tree_util.tree_map(lambda x: x[0], out)
 
 
-_gait_multipliers_jit = filter_jit(_gait_multipliers)
+_gait_multipliers_jit = eqx.filter_jit(_gait_multipliers)
 gait_multipliers_jit = gait_multipliers
 
 
@@ -157,7 +156,7 @@ def finite_difference_jacobian(model, z, k=1, h=1e-6, config=DEFAULT_CONFIG):
     return jax.vmap(col, out_axes=1)(eye)
 
 
-finite_difference_jacobian_jit = filter_jit(finite_difference_jacobian)
+finite_difference_jacobian_jit = eqx.filter_jit(finite_difference_jacobian)
 
 
 # ---- a second Poincare section: q1 = 0 in mid-swing -------------------------------------
@@ -211,7 +210,7 @@ def to_midswing(model, z, config=DEFAULT_CONFIG):
     return xs[1:], ok
 
 
-@filter_jit
+@eqx.filter_jit
 def midswing_multipliers(model, z, config=DEFAULT_CONFIG):
     """Multipliers of the gait through post-impact `z`, computed on the mid-swing section
     $q_1 = 0$ (jacfwd of `midswing_map`). **Returns:** `(multipliers, w, ok)`."""
@@ -225,7 +224,7 @@ def midswing_multipliers(model, z, config=DEFAULT_CONFIG):
 _fixed_point_jit = _poincare.fixed_point_jit
 
 
-@filter_jit
+@eqx.filter_jit
 def _fixed_points_batch(model, psis, z0s, k=1, config=DEFAULT_CONFIG):
     return jax.vmap(lambda p, z: fixed_point(with_slope(model, p), z, k, config=config))(
         psis, z0s)
@@ -417,7 +416,7 @@ class BifurcationDiagram(eqx.Module):
     period_pattern: np.ndarray
 
 
-@filter_jit
+@eqx.filter_jit
 def _long_runs(model, psis, x0s, num_steps, num_record, config):
     def one(p, x0):
         sim = simulate(with_slope(model, p), x0, num_steps, config=config)

@@ -1,0 +1,140 @@
+"""Continuation: homotopy in the model parameters from a known gait, with a tangent
+predictor (implicit differentiation of the residual)."""
+
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._batching import bucket_size
+from .._results import RESULTS
+from ._dispatch import _check
+from ._dispatch import _relabel
+from ._dispatch import _search
+from ._dispatch import reference_guess
+from ._dispatch import reference_model
+from ._gait import family_sign
+from ._problem1 import vhc_residual
+from ._shooting import _shoot_eval
+from ._shooting import complete_guess_jit
+
+
+# ---------------------------------------------------------------------------------------
+# Continuation (homotopy in the parameters; sweeps in the slope)
+# ---------------------------------------------------------------------------------------
+_HOMOTOPY_LEAVES = ("m1", "m2", "mH", "a", "b", "g", "psi")
+
+
+def _unknowns(gait, method):
+    return jnp.stack([gait.a, gait.b]) if method == "vhc" else jnp.stack([gait.a, gait.b, gait.f])
+
+
+def _residual(model, z, sign, method):
+    if method == "vhc":
+        return vhc_residual(model, z, sign)
+    return _shoot_eval(model, z)[0]
+
+
+def _tangent(path, s, z, sign, method):
+    r"""$dz^*/ds = -(\partial r/\partial z)^{-1}\,\partial r/\partial s$ along `path(s)` (implicit
+    differentiation of the residual; one forward-mode Jacobian in $(z, s)$)."""
+    k = z.shape[0]
+    J = jax.jacfwd(lambda w: _residual(path(w[k]), w[:k], sign, method))(
+        jnp.concatenate([z, jnp.asarray(s, z.dtype)[None]])
+    )
+    t = -jnp.linalg.solve(J[:, :k], J[:, k])
+    return jnp.where(jnp.isfinite(t).all(), t, jnp.zeros_like(t))
+
+
+def _path(start, end):
+    r"""$s \mapsto$ model with every physical leaf interpolated geometrically (they are
+    positive) from `start` (s = 0) to `end` (s = 1); `s` may leave [0, 1]."""
+
+    def path(s):
+        m = end
+        for name in _HOMOTOPY_LEAVES:
+            p0 = jnp.asarray(getattr(start, name), dtype=float)
+            p1 = jnp.asarray(getattr(end, name), dtype=float)
+            m = eqx.tree_at(lambda mm: getattr(mm, name), m, p0 * (p1 / p0) ** s)
+        return m
+
+    return path
+
+
+def _continue(start, end, s_buf, n, z0, sign, method):
+    """Follow the solution of the model `_path(start, end)(s)` through `s_buf[:n]`
+    (a `fori_loop` with a dynamic length over a fixed-size buffer), from the seed `z0` at
+    `s_buf[0]`, with a tangent predictor. A failed point does not move the anchor: the
+    next one is predicted from the last success.
+
+    **Returns:** a batched `Gait` (one per buffer entry; entries from `n` on are unset)
+    and the tangents $dz^*/ds$ (zero where the search failed).
+    """
+    path = _path(start, end)
+    s0 = s_buf[0]
+    t0 = _tangent(path, s0, z0, sign, method)
+    shape = jax.eval_shape(lambda: _search(path(s0), z0, sign, method))
+    buf = jax.tree_util.tree_map(lambda l: jnp.zeros((s_buf.shape[0],) + l.shape, l.dtype), shape)
+    tbuf = jnp.zeros((s_buf.shape[0], z0.shape[0]), z0.dtype)
+
+    def body(i, carry):
+        s_good, z_good, t_good, buf, tbuf = carry
+        s = s_buf[i]
+        gait = _search(path(s), z_good + t_good * (s - s_good), sign, method)
+        ok = gait.result == RESULTS.successful
+        z_new = _unknowns(gait, method)
+        t_new = _tangent(path, s, z_new, sign, method)
+        ok_t = ok & jnp.any(t_new != 0)
+        buf = jax.tree_util.tree_map(lambda b, v: b.at[i].set(v), buf, gait)
+        tbuf = tbuf.at[i].set(jnp.where(ok, t_new, 0.0))
+        return (
+            jnp.where(ok, s, s_good), jnp.where(ok, z_new, z_good),
+            jnp.where(ok_t, t_new, t_good), buf, tbuf,
+        )
+
+    init = (s0, z0, t0, buf, tbuf)
+    _, _, _, buf, tbuf = jax.lax.fori_loop(0, n, body, init)
+    return buf, tbuf
+
+
+_continue_jit = eqx.filter_jit(_continue)
+
+
+def _run_continuation(start, end, s_values, z0, sign, method):
+    """Host wrapper: pad `s_values` to a power of two (fewer recompiles), run, unpad."""
+    import numpy as np
+
+    s_values = np.asarray(s_values, dtype=float)
+    n = len(s_values)
+    s_buf = np.concatenate([s_values, np.full(bucket_size(n, 16) - n, s_values[-1])])
+    # `n` traced: every length up to the buffer size shares one compilation.
+    gaits, tangents = _continue_jit(start, end, jnp.asarray(s_buf), jnp.asarray(n), z0, sign, method)
+    return jax.tree_util.tree_map(lambda x: x[:n], gaits), tangents[:n]
+
+
+_HOMOTOPY_STEPS = 16
+
+
+def _seed(sign, method):
+    ref = reference_model()
+    ab = jnp.where(sign < 0, reference_guess("stable"), reference_guess("unstable"))
+    # Compiled: op by op, its ~250 small operations each compiled a program of their own
+    # (7 s in a fresh process, against 0.7 s as one program).
+    return ab if method == "vhc" else complete_guess_jit(ref, ab, sign)
+
+
+def continue_to_model(model, family="stable", method="vhc", num=_HOMOTOPY_STEPS):
+    """The `family` gait of `model` without a guess: homotopy from the default model at
+    3 degrees (thesis Table 1, `reference_model`) to `model`, all physical parameters at
+    once (geometric interpolation), in `num` steps with a tangent predictor.
+
+    **Returns:** a `Gait` (never raises; check `result`).
+    """
+    import numpy as np
+
+    _check(family, method)
+    sign = family_sign(family)
+    gaits, _ = _run_continuation(
+        reference_model(), model, np.linspace(0.0, 1.0, num), _seed(sign, method), sign, method
+    )
+    return _relabel(jax.tree_util.tree_map(lambda x: x[-1], gaits), family)

@@ -1,0 +1,209 @@
+"""`find_gait` and `find_gaits`: the gait search as users call it, one gait or a batch."""
+
+
+import warnings
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._batching import bucket_size, device_multiple, host_workers, in_chunks, shard_batch
+from .._results import RESULTS
+from ._continuation import _HOMOTOPY_STEPS
+from ._continuation import _continue
+from ._continuation import _seed
+from ._continuation import continue_to_model
+from ._dispatch import _check
+from ._dispatch import _relabel
+from ._dispatch import _search
+from ._dispatch import reference_model
+from ._gait import family_sign
+from ._problem1 import _with_psi
+
+
+def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newton", throw=True):
+    """Find the periodic gait of `family` on `model`.
+
+    **Arguments:**
+
+    - `model`: a `CompassGait` (any masses, lengths, gravity, slope).
+    - `family`: `"stable"` or `"unstable"` (the root of the energy quadratic, 7.3/7.8).
+    - `method`: `"vhc"` (Problem 1) or `"shooting"` (Problem 2).
+    - `guess`: $(a_0, b_0)$ (or $(a_0, b_0, f_0)$ for shooting). `None`: continue the
+      known default-model gait to `model` (homotopy in the parameters).
+    - `solver`: VHC only: `"newton"` (default), `"lm"`, `"optimistix"` or `"optax"`.
+    - `throw`: raise if no gait was found.
+
+    **Returns:** a `Gait`.
+    """
+    _check(family, method)
+    if guess is None:
+        gait = continue_to_model(model, family, method)
+    else:
+        guess = jnp.asarray(guess, dtype=float)
+        gait = _search_one_jit(model, guess, family_sign(family), method, solver)
+        gait = _relabel(gait, family)
+    if throw:
+        err = gait.result != RESULTS.successful
+        gait = eqx.tree_at(lambda g: g.a, gait, gait.result.error_if(gait.a, err))
+    return gait
+
+
+# ---------------------------------------------------------------------------------------
+# Batches
+# ---------------------------------------------------------------------------------------
+#: Largest number of members per device in one dispatch: larger batches run in chunks of
+#: this size, all compiled as one program (see `_batching.MAX_DISPATCH`).
+_MAX_CHUNK = 128
+#: Guessed batches with at least this many members per device finish with chord steps.
+_CHORD_MIN_MEMBERS = 64
+#: Batches of at most this many members per host worker are not split over workers: the
+#: run is short next to its compilation, and splitting would compile a second size.
+_MIN_SPLIT = 8
+
+
+_search_one_jit = eqx.filter_jit(_search)
+
+
+def _padded_size(B, mesh):
+    """Batch size after padding: a bucket per device, times the device count."""
+    if B == 1:
+        return 1
+    k = device_multiple(mesh)
+    return bucket_size(-(-B // k)) * k
+
+
+def _chunk_size(B, workers, mesh):
+    """Members per dispatch: at most `_MAX_CHUNK` per device; with several host workers
+    (CPU cores, `_batching.host_workers`) a batch of more than `_MIN_SPLIT` per worker is
+    split into one bucket-sized chunk per worker, so that all cores work."""
+    k = device_multiple(mesh)
+    chunk = _MAX_CHUNK * k
+    if workers > 1 and B > _MIN_SPLIT * workers:
+        chunk = min(chunk, bucket_size(-(-B // (workers * k))) * k)
+    return chunk
+
+
+def _batched_axes(model):
+    return jax.tree_util.tree_map(
+        lambda x: 0 if (eqx.is_array(x) and jnp.ndim(x) > 0) else None, model
+    )
+
+
+@eqx.filter_jit
+def _search_batch(model, guesses, sign, method, solver, axes, chord):
+    return _search(model, guesses, sign, method, solver, chord, axes)
+
+
+@eqx.filter_jit
+def _search_single(model, guesses, sign, method, solver, chord):
+    """`_search` on a batch of one member, unbatched inside."""
+    one = jax.tree_util.tree_map(
+        lambda x: x[0] if (eqx.is_array(x) and jnp.ndim(x) > 0) else x, model
+    )
+    gait = _search(one, guesses[0], sign, method, solver, chord)
+    return jax.tree_util.tree_map(lambda x: x[None], gait)
+
+
+def _from_reference(model, sign, method, num=_HOMOTOPY_STEPS):
+    s_buf = jnp.linspace(0.0, 1.0, num)
+    gaits, _ = _continue(reference_model(), model, s_buf, num, _seed(sign, method), sign, method)
+    return jax.tree_util.tree_map(lambda x: x[-1], gaits)
+
+
+@eqx.filter_jit
+def _from_reference_batch(model, sign, method, num, axes):
+    return eqx.filter_vmap(lambda m: _from_reference(m, sign, method, num), in_axes=(axes,))(model)
+
+
+def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, solver="newton",
+               mesh=None, chord=None, vectorise=None):
+    """Batched `find_gait` over guesses, slopes and model parameters; never raises.
+
+    **Arguments:**
+
+    - `model`: a `CompassGait`; any parameter may be an array with a leading batch axis.
+    - `guesses`: `(B, 2)` (or `(B, 3)` for shooting) seeds, or `None` for continuation
+      from the reference gait (per member).
+    - `family`, `method`, `solver`: as in `find_gait`.
+    - `psi`: optional `(B,)` slopes (rad), replacing `model.psi`.
+    - `mesh`: a `jax.sharding.Mesh` with a `"batch"` axis; default: all local devices.
+    - `chord`: with `guesses`, finish Newton with chord steps (see `vhc_search`).
+      `None` (default): where a device holds 64 or more members.
+    - `vectorise`: ignored (every batch is one vectorised Newton loop); kept so that
+      existing calls still run.
+
+    With `solver="newton"` one Newton loop iterates every member of a batch, each member
+    stopping at its own convergence (`damped_newton_batch`); other solvers run by `vmap`.
+    Batches are padded (with copies of the first member) to a power of two per device,
+    so that nearby sizes share one compiled program; larger batches run in chunks of 128
+    per device, concurrently from one host thread per CPU core (`_batching.host_workers`;
+    XLA runs each program on one core). Each chunk is split over the devices of `mesh`.
+    A different split changes the results by rounding only, with the same result codes.
+
+    **Returns:** a `Gait` with a leading batch axis; check `result` per member.
+    """
+    _check(family, method)
+    if vectorise is not None:
+        warnings.warn(
+            "find_gaits(vectorise=...) is ignored: every batch is one vectorised Newton loop",
+            DeprecationWarning, stacklevel=2,
+        )
+    if psi is not None:
+        model = _with_psi(model, jnp.asarray(psi, dtype=float))
+    sizes = [
+        jnp.shape(x)[0] for x in jax.tree_util.tree_leaves(model)
+        if eqx.is_array(x) and jnp.ndim(x) > 0
+    ]
+    if guesses is not None:
+        guesses = jnp.atleast_2d(jnp.asarray(guesses, dtype=float))
+        sizes.append(guesses.shape[0])
+    if not sizes:
+        raise ValueError("find_gaits needs a batch: guesses, psi or batched model parameters")
+    B = max(sizes)
+    workers = host_workers(mesh)
+    chunk = _chunk_size(B, workers, mesh)
+    if chord is None:  # members per device of one dispatch (every chunk: one program)
+        chord = _padded_size(min(B, chunk), mesh) // device_multiple(mesh) >= _CHORD_MIN_MEMBERS
+    sign = family_sign(family)
+    if B <= chunk:
+        gaits = _find_chunk(model, guesses, B, _padded_size(B, mesh), sign, method, solver,
+                            mesh, chord)
+        return _relabel(gaits, family)
+
+    def part(x, i, j):
+        if eqx.is_array(x) and jnp.ndim(x) > 0:
+            return jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])[i:j]
+        return x
+
+    gaits = in_chunks(
+        lambda i, j: _find_chunk(
+            jax.tree_util.tree_map(lambda x: part(x, i, j), model),
+            None if guesses is None else part(guesses, i, j),
+            j - i, chunk, sign, method, solver, mesh, chord,
+        ),
+        B, chunk, workers,
+    )
+    return _relabel(gaits, family)
+
+
+def _find_chunk(model, guesses, B, P, sign, method, solver, mesh, chord):
+    """`find_gaits` on one dispatch of `B` members: pad to `P` (a bucket times the device
+    count), search, unpad."""
+    if P == 1 and guesses is not None:  # one member: no batching to trace or run
+        return _search_single(model, guesses, sign, method, solver, bool(chord))
+
+    def pad(x):
+        x = jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])
+        x = jnp.concatenate([x, jnp.broadcast_to(x[:1], (P - B,) + x.shape[1:])])
+        return shard_batch(x, mesh)
+
+    model = jax.tree_util.tree_map(
+        lambda x: pad(x) if (eqx.is_array(x) and jnp.ndim(x) > 0) else x, model
+    )
+    axes = _batched_axes(model)
+    if guesses is None:
+        gaits = _from_reference_batch(model, sign, method, _HOMOTOPY_STEPS, axes)
+    else:
+        gaits = _search_batch(model, pad(guesses), sign, method, solver, axes, bool(chord))
+    return jax.tree_util.tree_map(lambda x: x[:B], gaits)

@@ -1,0 +1,130 @@
+"""The `Gait` pytree: one periodic gait (thesis (5.2)) and the quantities derived from it."""
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._results import RESULTS
+from ..hybrid import SolverConfig
+
+
+FAMILIES = ("stable", "unstable")
+METHODS = ("vhc", "shooting")
+
+#: Settings of the $\phi''$ integration (smooth, no events: an 8th-order method).
+VHC_CONFIG = SolverConfig(rtol=1e-12, atol=1e-12, max_steps=512, solver="dopri8")
+
+#: A gait is accepted when the max-norm of its residual is below this.
+SUCCESS_TOL = 1e-9
+
+#: Loosest integration tolerance of the inexact Newton iterations (`damped_newton`).
+_LOOSE_TOL = 1e-6
+#: Residual below which Newton keeps its Jacobian and evaluates the residual alone.
+_CHORD_BELOW = 1e-3
+#: The Newton-step convergence test of the searches also needs a residual below this.
+_RESIDUAL_CAP = SUCCESS_TOL / 10
+
+# Known gaits of the default model (thesis Table 1) at 3 degrees: (a, b). Seeds for
+# continuation only (they need not be exact; tests check the gaits found from them).
+_REFERENCE_PSI = math.radians(3.0)
+_REFERENCE_AB = {
+    "stable": (0.2186687938, -1.0923835909),
+    "unstable": (0.2046755397, -1.2105718434),
+}
+
+
+class Gait(eqx.Module):
+    """A periodic gait (one step, symmetric), thesis (5.2).
+
+    - `a, b, e, f`: post-impact $q_1, \\dot q_1, q_2, \\dot q_2$.
+    - `c, d, g, h`: pre-impact $q_1, \\dot q_1, q_2, \\dot q_2$.
+    - `T`: step period (s); `E0`: energy along the step (J, zero with both legs vertical
+      and at rest, thesis 5.10).
+    - `x_plus`, `x_minus`: post- and pre-impact states $[q, \\dot q]$.
+    - `step_length`: distance between the feet at heel strike (m); `speed`: step length
+      over period (m/s); `energy_loss`: kinetic energy lost in the impact (J).
+    - `iterations`, `residual`: of the search (max-norm of the final residual).
+    - `result`: a `RESULTS` code.
+    - `family`, `method`: static labels.
+    """
+
+    a: jax.Array
+    b: jax.Array
+    c: jax.Array
+    d: jax.Array
+    e: jax.Array
+    f: jax.Array
+    g: jax.Array
+    h: jax.Array
+    T: jax.Array
+    E0: jax.Array
+    x_plus: jax.Array
+    x_minus: jax.Array
+    step_length: jax.Array
+    speed: jax.Array
+    energy_loss: jax.Array
+    iterations: jax.Array
+    residual: jax.Array
+    result: RESULTS
+    family: str = eqx.field(static=True, default="stable")
+    method: str = eqx.field(static=True, default="vhc")
+
+    @property
+    def z(self):
+        """Section coordinates $(q_1, \\dot q_1, \\dot q_2)$ of the post-impact state."""
+        return jnp.stack([self.a, self.b, self.f], axis=-1)
+
+    def params(self):
+        """`{"a": ..., ..., "h": ..., "T": ..., "E0": ...}` (arrays)."""
+        return {k: getattr(self, k) for k in ("a", "b", "c", "d", "e", "f", "g", "h", "T", "E0")}
+
+
+def family_sign(family):
+    """The sign in front of the square root of (5.13): `"stable"` -> -1 (thesis selector
+    2, 7.3), `"unstable"` -> +1 (selector 1, 7.8). Arrays pass through (traced signs let
+    both families share one compiled function)."""
+    if isinstance(family, str):
+        if family not in FAMILIES:
+            raise ValueError(f"family must be one of {FAMILIES}, got {family!r}")
+        return jnp.asarray(-1.0 if family == "stable" else 1.0)
+    return jnp.asarray(family, dtype=float)
+
+
+def _derived(model, x_plus, x_minus, T):
+    n = model.n_dof
+    step_length = jnp.linalg.norm(model.contact_point(x_minus[:n]))
+    speed = step_length / T
+    # The potential energy is continuous through the impact: the loss is kinetic.
+    ke = lambda x: model.kinetic_energy(x[:n], x[n:])  # noqa: E731
+    return step_length, speed, ke(x_minus) - ke(x_plus)
+
+
+def _make_gait(model, x_plus, x_minus, T, E0, iterations, residual, code, family, method,
+               physical=None):
+    """The `Gait`; `physical`: whether the impact at `x_minus` pushes the foot away from the
+    ground (`None`: computed here)."""
+    n = model.n_dof
+    step_length, speed, loss = _derived(model, x_plus, x_minus, T)
+    if physical is None:
+        _, _, physical = model.impact(x_minus)
+    # A periodic solution walking uphill in negative time (thesis 7.17-7.18).
+    uphill = (x_plus[n] > 0) | (T < 0)
+    code = RESULTS.where(
+        (code == RESULTS.successful) & uphill, RESULTS.infeasible_uphill, code
+    )
+    code = RESULTS.where((code == RESULTS.successful) & ~physical, RESULTS.bad_impact, code)
+    code = RESULTS.where(model.validate(), code, RESULTS.bad_input)
+    return Gait(
+        a=x_plus[0], b=x_plus[n], c=x_minus[0], d=x_minus[n],
+        e=x_plus[1], f=x_plus[n + 1], g=x_minus[1], h=x_minus[n + 1],
+        T=T, E0=E0, x_plus=x_plus, x_minus=x_minus,
+        step_length=step_length, speed=speed, energy_loss=loss,
+        iterations=jnp.asarray(iterations), residual=residual, result=code,
+        family=family, method=method,
+    )
+
+
+def _label(family):
+    return family if isinstance(family, str) else ""

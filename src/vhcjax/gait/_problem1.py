@@ -1,0 +1,371 @@
+"""Periodic gaits: the VHC search (thesis Problem 1) and shooting (Problem 2).
+
+**VHC search** (thesis 5.1-5.4). Unknowns $(a, b) = (q_1, \\dot q_1)$ just after impact.
+The heel-strike geometry gives $c = -a - 2\\psi$, $g = a$, $e = c$ (5.5)-(5.6). The impact
+map is linear in the velocities, $\\dot q^+ = P(q^-)\\dot q^-$ (5.7), so with $b$ and $d$
+given the remaining velocities $f, h$ follow (5.9); here $P$ is taken from the model's
+impact map by `jax.jacfwd`, not from the closed form. Energy conservation along the
+constraint, $E(c, d) = E(a, b)$, is a quadratic $A d^2 + B d + C = 0$ in $d$ (5.13); its
+coefficients are obtained by evaluating the energy difference at $d = -1, 0, 1$ (the
+thesis closed form (5.14) is a test oracle). `family="stable"` takes the root
+$(-B - \\sqrt{\\Delta})/2A$ (thesis selector 2, 7.3), `"unstable"` the root with the plus
+sign (selector 1, 7.8). Then $\\phi'' = f_0$ (5.19) is integrated in $\\theta$ from $a$ to
+$c$ (fixed endpoints, no event), carrying the time $dt/d\\theta = 1/\\dot\\theta$, and the
+residual of (5.20), $(\\phi(c) - g, \\phi'(c) - h/d)$, is driven to zero by Newton's
+method (forward-mode Jacobian) or, optionally, by an optax optimiser on its square.
+
+**Shooting** (Problem 2): Newton on the step-to-step map of the hybrid simulation on
+the post-impact section (`vhcjax.hybrid.fixed_point`).
+
+Both return the same `Gait` pytree and never raise under `jit`/`vmap`: inspect `result`.
+"""
+
+from typing import NamedTuple
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+
+from .._results import RESULTS
+from ..solvers import levenberg_marquardt
+from ..solvers import optax_minimise
+from ._gait import SUCCESS_TOL
+from ._gait import VHC_CONFIG
+from ._gait import _LOOSE_TOL
+from ._gait import _RESIDUAL_CAP
+from ._gait import _label
+from ._gait import _make_gait
+from ._gait import family_sign
+from ._newton_search import _each_member
+from ._newton_search import _newton_search
+from ._vhc import phi_second_derivative
+from ._vhc import singularity_terms
+
+
+# ---------------------------------------------------------------------------------------
+# Algebra of Problem 1
+# ---------------------------------------------------------------------------------------
+def _with_psi(model, psi):
+    return eqx.tree_at(lambda m: m.psi, model, jnp.asarray(psi, dtype=float))
+
+
+def impact_configuration(model, a):
+    """Post-impact $q^+ = (a, e)$ and pre-impact $q^- = (c, g)$ configurations (5.5)-(5.6)."""
+    n = model.n_dof
+    x = model.section_to_state(jnp.concatenate([jnp.atleast_1d(a), jnp.zeros(n)]))
+    q_plus = x[:n]
+    q_minus, _ = model.relabel(q_plus, jnp.zeros(n))  # the leg swap is an involution
+    return q_plus, q_minus
+
+
+def impact_velocity_matrix(model, q_minus):
+    """$P(q^-)$ with $\\dot q^+ = P\\dot q^-$ (relabelled, thesis 5.7), by `jax.jacfwd` of the
+    model's impact map (which is linear in the velocities)."""
+    n = model.n_dof
+
+    def dq_plus(dq):
+        return model.impact(jnp.concatenate([q_minus, dq]))[0][n:]
+
+    return jax.jacfwd(dq_plus)(jnp.zeros(n, dtype=q_minus.dtype))
+
+
+class _ImpactData(NamedTuple):
+    """What (5.5)-(5.9) fix from $a$ alone: $q^+$, $q^-$ and $P(q^-)$."""
+
+    q_plus: jax.Array
+    q_minus: jax.Array
+    P: jax.Array
+
+
+def _impact_data(model, a):
+    q_plus, q_minus = impact_configuration(model, a)
+    return _ImpactData(q_plus, q_minus, impact_velocity_matrix(model, q_minus))
+
+
+def _relations(data, b, d):
+    P = data.P
+    h = (b - P[0, 0] * d) / P[0, 1]
+    f = P[1, 0] * d + P[1, 1] * h
+    return f, h
+
+
+def velocity_relations(model, a, b, d):
+    """$(f, h)$ from $(a, b, d)$ (thesis 5.9), derived from the impact map: solve
+    $b = P_{11} d + P_{12} h$ for $h$, then $f = P_{21} d + P_{22} h$."""
+    return _relations(_impact_data(model, a), b, d)
+
+
+def _states_from(data, b, d):
+    f, h = _relations(data, b, d)
+    x_plus = jnp.concatenate([data.q_plus, jnp.stack([b, f])])
+    x_minus = jnp.concatenate([data.q_minus, jnp.stack([d, h])])
+    return x_plus, x_minus
+
+
+def _states(model, a, b, d):
+    return _states_from(_impact_data(model, a), b, d)
+
+
+def _energy_gap(model, data, b, d):
+    x_plus, x_minus = _states_from(data, b, d)
+    return model.energy(x_minus) - model.energy(x_plus)
+
+
+def energy_gap(model, a, b, d):
+    """$E(c, d) - E(a, b)$ with $c, e, f, g, h$ eliminated (thesis 5.12-5.13)."""
+    return _energy_gap(model, _impact_data(model, a), b, d)
+
+
+def _quadratic(model, data, b):
+    ds = jnp.array([-1.0, 0.0, 1.0]) * jnp.ones_like(jnp.asarray(b, dtype=float))
+    # One trace of the energies, batched over the three values of d.
+    fm, f0, fp = jax.vmap(lambda d: _energy_gap(model, data, b, d))(ds)
+    return 0.5 * (fp + fm) - f0, 0.5 * (fp - fm), f0
+
+
+def quadratic_coefficients(model, a, b):
+    """$(A, B, C)$ of $A d^2 + B d + C = E(c, d) - E(a, b)$ (thesis 5.13-5.14), from the
+    energy difference at $d = -1, 0, 1$ (exact: it is a quadratic in $d$)."""
+    return _quadratic(model, _impact_data(model, a), b)
+
+
+def solve_for_d(model, a, b, family):
+    """$d$ from (5.13): `"stable"` = thesis selector 2 ($-\\sqrt{}$, 7.3), `"unstable"` =
+    selector 1 ($+\\sqrt{}$, 7.8); `family` may also be that sign. **Returns:** `(d, real)`
+    where `real` is False when $B^2 - 4AC < 0$ (then `d` is the vertex $-B/2A$)."""
+    return _solve_for_d(model, _impact_data(model, a), b, family)
+
+
+def _solve_for_d(model, data, b, family):
+    sign = family_sign(family)
+    A, B, C = _quadratic(model, data, b)
+    disc = B**2 - 4 * A * C
+    root = jnp.sqrt(jnp.maximum(disc, 0.0))
+    return (-B + sign * root) / (2 * A), disc >= 0
+
+
+class BoundaryData(eqx.Module):
+    """Everything Problem 1 derives from $(a, b)$ before and after the $\\phi$ integration."""
+
+    x_plus: jax.Array
+    x_minus: jax.Array
+    E0: jax.Array
+    phi_c: jax.Array  # (phi(c), phi'(c))
+    T: jax.Array
+    residual: jax.Array  # (phi(c) - g, phi'(c) - h/d)
+    result: RESULTS
+
+
+def _phi_field(theta, y, args):
+    """$(\\phi', \\phi'', dt/d\\theta)$ (5.19; $dt/d\\theta = \\pm 1/\\sqrt{\\dot\\theta^2}$) and
+    a fourth rate, 1 where the ODE is singular ($\\dot\\theta^2 \\le 0$ or a non-finite
+    rate), where the others are 0: the state stops there, the integration finishes in a
+    few steps instead of shrinking its steps to the step limit (which, in a batch, every
+    member would wait for), and `y[3] > 0` flags it."""
+    model, E0, sign = args
+    phi, dphi = y[0:1], y[1:2]
+    ddphi, _, dth2, _ = phi_second_derivative(model, E0, theta, phi, dphi)
+    rate = jnp.concatenate([dphi, ddphi, (sign / jnp.sqrt(jnp.where(dth2 > 0, dth2, 1.0)))[None]])
+    ok = (dth2 > 0) & jnp.isfinite(rate).all()
+    return jnp.concatenate([jnp.where(ok, rate, 0.0), jnp.where(ok, 0.0, 1.0)[None]])
+
+
+#: Smallest step of the `phi` integration over s in [0, 1]: a member whose solution needs
+#: shorter steps is singular there (it approaches a blow-up of phi', with shrinking
+#: steps and finite rates) and fails at once (`dt_min_reached`) instead of spending the
+#: step limit, which a vmapped batch would wait for. The converged gaits of both
+#: families from 0.5 to 6 degrees take steps of at least 1.1e-3 (at 1e-12 and 1e-6).
+_PHI_DTMIN = 1e-8
+
+
+def _phi_error_norm(e):
+    """The step-size controller's norm: the RMS of the first three components (the
+    singularity flag of `_phi_field` is no part of the solution's error)."""
+    return optx.rms_norm(e[:3])
+
+
+def _phi_field_unit(s, y, args):
+    """`_phi_field` over $s \\in [0, 1]$, $\\theta = a + s (c - a)$: the integration
+    interval is static, so diffrax inserts no runtime check of its direction (a host
+    callback, which would keep the compiled program out of JAX's persistent cache).
+    The steps and error estimates are those of the integration over $\\theta$."""
+    a, span, field_args = args
+    rate = _phi_field(a + s * span, y, field_args)
+    return jnp.concatenate([span * rate[:3], rate[3:]])  # the flag counts in s
+
+
+# diffrax traces the field several times; jitted, the later traces reuse the first jaxpr.
+_phi_field_unit_jit = eqx.filter_jit(_phi_field_unit)
+
+
+def _with_tolerance(config, tol):
+    """`config` with `rtol = tol` and `atol` scaled alike (`tol` may be traced: the
+    inexact Newton iterations of `damped_newton`); `tol=None` leaves it unchanged."""
+    if tol is None:
+        return config
+    return config._replace(rtol=tol, atol=config.atol * (tol / config.rtol))
+
+
+def _solver(name):
+    return {"tsit5": diffrax.Tsit5, "dopri8": diffrax.Dopri8, "dopri5": diffrax.Dopri5}[name]()
+
+
+def vhc_boundary(model, ab, family, config=VHC_CONFIG):
+    """Integrate $\\phi'' = f_0$ (5.19) over $\\theta \\in [a, c]$ for given $(a, b)$; the
+    residual of Problem 1 (5.20) and the data of the candidate gait."""
+    a, b = ab[0], ab[1]
+    data = _impact_data(model, a)
+    d, real = _solve_for_d(model, data, b, family)
+    return _boundary_abd(model, data, a, b, d, real, config)
+
+
+def _boundary_abd(model, data, a, b, d, real, config):
+    """`vhc_boundary` for a given $d$ (not necessarily a root of 5.13)."""
+    real = jnp.asarray(real)
+    d = jnp.where(real, d, -1.0)  # keep the arithmetic finite on failure
+    x_plus, x_minus = _states_from(data, b, d)
+    E0 = model.energy(x_plus)
+    n = model.n_dof
+    e, f = x_plus[1], x_plus[n + 1]
+    c, g, h = x_minus[0], x_minus[1], x_minus[n + 1]
+    # phi'(a) = f/b; M_theta > 0 and theta_dot^2 > 0 at both ends, else singular.
+    y0 = jnp.stack([e, f / b, 0.0, 0.0])
+    ok0 = jnp.isfinite(y0).all()
+    y0 = jnp.where(ok0, y0, jnp.array([e, 0.0, 0.0, 0.0]))
+    sign = jnp.sign(b)
+    regular_start = ok0 & (b != 0) & (d != 0)
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(_phi_field_unit_jit),
+        _solver(config.solver),
+        t0=0.0,
+        t1=1.0,
+        dt0=1.0 / 64,
+        y0=y0,
+        # A member already singular at the start gets an empty interval (a few steps).
+        args=(a, jnp.where(regular_start & real, c - a, 0.0), (model, E0, sign)),
+        stepsize_controller=diffrax.PIDController(
+            rtol=config.rtol, atol=config.atol, norm=_phi_error_norm,
+            dtmin=_PHI_DTMIN,
+        ),
+        saveat=diffrax.SaveAt(t1=True),
+        max_steps=config.max_steps,
+        adjoint=diffrax.ForwardMode(),
+        throw=False,
+    )
+    yc = sol.ys[-1]
+    # Both ends in one batched call (one trace of the mass matrix and energies).
+    dth2, det = jax.vmap(lambda th, y: singularity_terms(model, E0, th, y[0:1], y[1:2]))(
+        jnp.stack([a, c]), jnp.stack([y0[:2], yc[:2]])
+    )
+    dth2_a, dth2_c, det_a, det_c = dth2[0], dth2[1], det[0], det[1]
+    residual = jnp.stack([yc[0] - g, yc[1] - h / d])
+    singular = (
+        ~regular_start
+        | (sol.result != diffrax.RESULTS.successful)
+        | ~jnp.isfinite(yc).all()
+        | (yc[3] > 0)  # the ODE went singular on the way (`_phi_field`)
+        | ~jnp.isfinite(residual).all()
+        | (dth2_a <= 0)
+        | (dth2_c <= 0)
+        | (jnp.abs(det_a) < 1e-12)
+        | (jnp.abs(det_c) < 1e-12)
+    )
+    code = RESULTS.where(
+        ~real, RESULTS.no_real_root, RESULTS.where(singular, RESULTS.singular_phi_ode, RESULTS.successful)
+    )
+    ok = code == RESULTS.successful
+    residual = jnp.where(ok, residual, jnp.zeros_like(residual))
+    return BoundaryData(x_plus, x_minus, E0, yc[:2], yc[2], residual, code)
+
+
+def _vhc_eval(model, ab, family, config=VHC_CONFIG, tol=None):
+    bd = vhc_boundary(model, ab, family, _with_tolerance(config, tol))
+    r = jnp.where(bd.result == RESULTS.successful, bd.residual, 1e3 * jnp.ones(2))
+    return r, bd
+
+
+def vhc_residual(model, ab, family, config=VHC_CONFIG):
+    """The residual vector of Problem 1, $(\\phi(c) - g, \\phi'(c) - h/d)$ (5.20); a large
+    constant where it is undefined (no real root, singular ODE), so Newton cannot stop
+    there."""
+    return _vhc_eval(model, ab, family, config)[0]
+
+
+def _finish_vhc(model, bd, iterations, solver_ok, family, config=VHC_CONFIG):
+    res = jnp.max(jnp.abs(bd.residual))
+    converged = solver_ok & (res < SUCCESS_TOL)
+    code = RESULTS.where(
+        bd.result != RESULTS.successful,
+        bd.result,
+        RESULTS.where(converged, RESULTS.successful, RESULTS.not_converged),
+    )
+    res = jnp.where(bd.result == RESULTS.successful, res, jnp.inf)
+    return _make_gait(
+        model, bd.x_plus, bd.x_minus, bd.T, bd.E0, iterations, res, code, _label(family), "vhc"
+    )
+
+
+def vhc_search(
+    model, guess, family="stable", *, solver="newton", rtol=1e-11, atol=1e-11,
+    max_steps=50, config=VHC_CONFIG, chord=False, axes=None,
+):
+    """Solve thesis Problem 1 for $(a, b)$ from `guess` (pure; never raises).
+
+    **Arguments:**
+
+    - `model`: a two-DOF `WalkerModel` (e.g. `CompassGait`).
+    - `guess`: $(a_0, b_0)$.
+    - `family`: `"stable"` (thesis selector 2) or `"unstable"` (selector 1).
+    - `solver`: `"newton"` (default: `damped_newton`, forward-mode Jacobian, steps
+      damped Levenberg-Marquardt style where a full step fails), `"lm"` (optimistix's
+      Levenberg-Marquardt only), `"optimistix"` (plain `optx.Newton`, which stalls from
+      the thesis seed (7.2) for the unstable family) or `"optax"` (L-BFGS on the squared
+      residual; slower, offered for comparison).
+    - `rtol`, `atol`, `max_steps`: of the solver.
+    - `config`: `SolverConfig` of the $\\phi''$ integration.
+    - `chord`: `"newton"` only: finish with chord steps (`damped_newton`'s
+      `chord_below`): in large batches 1.6x the throughput, for one more compiled
+      evaluation (1.5-2.2 s more to compile).
+    - `axes`: searches a batch. `guess` is then `(B, 2)` and `axes` gives the batch axis
+      of each of `model`'s leaves (`0` or `None`, as `jax.vmap`'s `in_axes`). With
+      `"newton"` one loop iterates every member (`damped_newton_batch`).
+
+    **Returns:** a `Gait` (with a leading batch axis with `axes`).
+    """
+    if axes is not None and solver != "newton":
+        return _each_member(vhc_search, model, guess, axes, family, solver=solver, rtol=rtol,
+                            atol=atol, max_steps=max_steps, config=config)
+    ab0 = jnp.asarray(guess, dtype=float)[..., :2]
+    res_fn = lambda ab: vhc_residual(model, ab, family, config)  # noqa: E731
+    if solver == "newton":
+        return _vhc_newton(model, ab0, family, config, chord, axes, rtol=rtol, atol=atol,
+                           max_steps=max_steps)
+    if solver == "lm":
+        ab, iters = levenberg_marquardt(res_fn, ab0, rtol, atol, 4 * max_steps)
+    elif solver == "optimistix":
+        sol = optx.root_find(
+            lambda ab, _: res_fn(ab),
+            optx.Newton(rtol=rtol, atol=atol), ab0, max_steps=max_steps, throw=False,
+        )
+        ab, iters = sol.value, sol.stats["num_steps"]
+    elif solver == "optax":
+        ab, iters = optax_minimise(res_fn, ab0, max_steps=20 * max_steps)
+    else:
+        raise ValueError(f"solver must be 'newton', 'lm', 'optimistix' or 'optax', got {solver!r}")
+    finite = jnp.isfinite(ab).all()
+    ab = jnp.where(finite, ab, ab0)
+    bd = vhc_boundary(model, ab, family, config)
+    return _finish_vhc(model, bd, iters, finite, family, config)
+
+
+def _vhc_newton(model, ab0, family, config=VHC_CONFIG, chord=False, axes=None, rtol=1e-11,
+                atol=1e-11, max_steps=50):
+    """`vhc_search` with `solver="newton"`."""
+    return _newton_search(
+        _vhc_eval, config, family,
+        lambda m, ab, r, bd, k: _finish_vhc(m, bd, k, jnp.isfinite(ab).all(), family, config),
+        model, ab0, axes, chord, rtol=rtol, atol=atol, max_steps=max_steps,
+        tolerances=(_LOOSE_TOL, config.rtol), residual_cap=_RESIDUAL_CAP,
+    )

@@ -1,0 +1,11 @@
+"""Root finders written for the gait searches: damped Newton for one member or a whole
+batch in one loop (per-member convergence, inexact evaluations, chord steps), and thin
+wrappers over optimistix's Levenberg-Marquardt and an optax minimiser."""
+
+from ._newton import (
+    batch_jacobian as batch_jacobian,
+    damped_newton as damped_newton,
+    damped_newton_batch as damped_newton_batch,
+    levenberg_marquardt as levenberg_marquardt,
+    optax_minimise as optax_minimise,
+)
