@@ -103,3 +103,29 @@ def test_compiled_search_kept_on_disk_and_read_back(tmp_path):
     assert second.returncode == 0, second.stderr[-2000:]
     assert second.stderr.count("Persistent compilation cache hit for 'jit__search'") == 2
     assert second.stdout == first.stdout
+
+
+def test_kneed_walker_gait_and_multipliers(capsys):
+    """`vhcjax gait --model kneed --method shooting` at the kneed walker's slope (0.0504
+    rad): the gait repeats under simulation, its multipliers are those of the library's
+    Poincare Jacobian (and the VHC search is refused with one line)."""
+    import json
+
+    import jax.numpy as jnp
+
+    rc = main(["gait", "--model", "kneed", "--method", "shooting",
+               "--slope-deg", "2.887707287459349", "--json"])
+    assert rc == 0
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["result"] == "successful" and rec["stable"] is True
+    np.testing.assert_allclose(rec["z"], [0.18818546, -1.10958733, -0.05714811], atol=1e-8)
+    np.testing.assert_allclose(rec["period"], 0.56432817, atol=1e-8)
+    kw = vj.KneedWalker()
+    sim = vj.simulate(kw, jnp.asarray(rec["x0"]), 3)
+    np.testing.assert_allclose(np.asarray(sim.steps.x_plus[-1]), rec["x0"], atol=1e-9)
+    ev = sorted(np.abs(np.asarray(rec["multipliers"])[:, 0] + 1j * np.asarray(rec["multipliers"])[:, 1]))
+    from vhcjax.stability import finite_difference_jacobian  # central differences
+
+    ref = np.asarray(finite_difference_jacobian(kw, jnp.asarray(rec["z"])))
+    np.testing.assert_allclose(ev, sorted(np.abs(np.linalg.eigvals(ref))), atol=1e-5)
+    assert main(["gait", "--model", "kneed", "--slope-deg", "3"]) == 2

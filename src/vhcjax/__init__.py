@@ -17,6 +17,12 @@ from ._cache import (
     enable_compilation_cache as enable_compilation_cache,
 )
 from .hybrid import (
+    fixed_point as fixed_point,
+    FixedPoint as FixedPoint,
+    jacobian as poincare_jacobian,
+    MapResult as MapResult,
+    multipliers as poincare_multipliers,
+    step_map as step_map,
     DEFAULT_CONFIG as DEFAULT_CONFIG,
     FAST_CONFIG as FAST_CONFIG,
     Simulation as Simulation,

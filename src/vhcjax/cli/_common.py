@@ -22,6 +22,49 @@ def add_model_flags(parser, *, slope=True, slope_default=3.0):
     return g
 
 
+#: Kneed-walker flags: (dest, flag, KneedWalker field, help).
+KNEED_FLAGS = (
+    ("mass_shank", "--mass-shank", "ms", "shank mass in kg (default 0.05)"),
+    ("mass_thigh", "--mass-thigh", "mt", "thigh mass in kg (default 0.5)"),
+    ("shank_a", "--shank-a", "a1", "foot to shank centre of mass in m (default 0.375)"),
+    ("shank_b", "--shank-b", "b1", "shank centre of mass to knee in m (default 0.125)"),
+    ("thigh_a", "--thigh-a", "a2", "knee to thigh centre of mass in m (default 0.175)"),
+    ("thigh_b", "--thigh-b", "b2", "thigh centre of mass to hip in m (default 0.325)"),
+)
+
+
+def add_model_choice(parser):
+    """`--model compass|kneed` and the kneed walker's own flags (`--mass-hip` and
+    `--gravity` apply to both; their defaults are each model's)."""
+    parser.add_argument("--model", default="compass", choices=("compass", "kneed"),
+                        help="compass gait (thesis) or passive kneed walker (Hsu Chen 2007 "
+                        "parameters; --mass-hip defaults to 0.5 kg for it) (default %(default)s)")
+    g = parser.add_argument_group("kneed walker (with --model kneed)")
+    for dest, flag, _, text in KNEED_FLAGS:
+        g.add_argument(flag, dest=dest, type=float, default=None, help=text)
+
+
+def kneed_from_args(args, slope_deg):
+    """Build and validate a `KneedWalker` from the flags (unset flags: its defaults)."""
+    from .. import KneedWalker
+
+    values = {}
+    for dest, flag, field, _ in KNEED_FLAGS + (("mass_hip", "--mass-hip", "mh", ""),
+                                              ("gravity", "--gravity", "g", "")):
+        v = getattr(args, dest, None)
+        if v is None or (dest in ("mass_hip", "gravity") and v == _COMPASS_DEFAULTS[dest]):
+            continue
+        check_finite(flag, v)
+        if v <= 0:
+            raise CLIError(f"{flag} must be positive, got {v}")
+        values[field] = v
+    check_slope_deg(slope_deg)
+    return KneedWalker(psi=math.radians(slope_deg), **values)
+
+
+_COMPASS_DEFAULTS = {"mass_hip": 10.0, "gravity": 9.81}
+
+
 def check_finite(name, *values):
     for v in values:
         if not math.isfinite(v):

@@ -5,8 +5,8 @@ import csv
 import math
 
 from ._common import (
-    CLIError, add_model_flags, check_slope_deg, model_from_args, parse_range, print_json,
-    progress,
+    CLIError, add_model_choice, add_model_flags, check_slope_deg, kneed_from_args,
+    model_from_args, parse_range, print_json, progress,
 )
 
 #: CSV columns of `vhcjax sweep` (`sweep_row` writes them; append new ones at the end).
@@ -30,10 +30,12 @@ def register(subparsers):
         "continued from the known default-model gait, so no starting point is needed.",
     )
     add_model_flags(p)
+    add_model_choice(p)
     _family_method(p, both=False)
-    p.add_argument("--guess", type=float, nargs=2, metavar=("A0", "B0"),
+    p.add_argument("--guess", type=float, nargs="+", metavar="X",
                    help="initial guess for q1 (rad) and dq1 (rad/s) just after impact, e.g. "
-                   "the thesis seed 0.20 -1.0; default: continuation, no guess needed")
+                   "the thesis seed 0.20 -1.0 (shooting: optionally dq2 too; kneed walker: "
+                   "q1 dq1 dq2); default: continuation, no guess needed")
     p.add_argument("--json", action="store_true",
                    help='print {"result", "slope_deg", "family", "method", "x0", "params", '
                    '"iterations", "residual"}')
@@ -83,16 +85,28 @@ def gait_json(gait, slope_deg):
     }
 
 
+#: Section point of the kneed walker's gait at its default slope (0.0504 rad), the seed
+#: of its shooting search.
+KNEED_SEED = (0.18818546, -1.10958733, -0.05714811)
+
+
 def run_gait(args):
     import jax.numpy as jnp
 
     from ..gait import find_gait
 
-    model = model_from_args(args)
-    guess = None
     if args.guess is not None:
         if not all(math.isfinite(v) for v in args.guess):
             raise CLIError(f"--guess must be finite, got {args.guess}")
+        sizes = (3,) if args.model == "kneed" else (2, 3) if args.method == "shooting" else (2,)
+        if len(args.guess) not in sizes:
+            raise CLIError(f"--guess takes {' or '.join(map(str, sizes))} numbers here, "
+                           f"got {len(args.guess)}")
+    if args.model == "kneed":
+        return _run_kneed_gait(args)
+    model = model_from_args(args)
+    guess = None
+    if args.guess is not None:
         guess = jnp.asarray(args.guess)
     gait = find_gait(model, args.family, args.method, guess, throw=False)
     rec = gait_json(gait, args.slope_deg)
@@ -109,6 +123,42 @@ def run_gait(args):
         print(f"  step length {float(gait.step_length):.6f} m, speed {float(gait.speed):.6f} m/s, "
               f"{rec['iterations']} iterations, residual {rec['residual']:.2e}")
     return 0 if rec["result"] == "successful" else 1
+
+
+def _run_kneed_gait(args):
+    """The kneed walker: shooting (Newton on its step map) and Poincare multipliers."""
+    import jax.numpy as jnp
+    import numpy as np
+
+    from .. import fixed_point, poincare_multipliers
+    from .._results import result_names
+
+    if args.method != "shooting":
+        raise CLIError("the kneed walker's gaits are found by shooting: use --method shooting")
+    model = kneed_from_args(args, args.slope_deg)
+    guess = jnp.asarray(args.guess if args.guess is not None else KNEED_SEED)
+    fp = fixed_point(model, guess)
+    result = result_names(fp.result)
+    rec = {"result": result, "slope_deg": args.slope_deg, "model": "kneed",
+           "method": "shooting", "z": np.asarray(fp.z).tolist(),
+           "x0": np.asarray(fp.x0).tolist(),
+           "residual": float(fp.residual), "iterations": int(fp.iterations)}
+    if result == "successful":
+        ev = np.asarray(poincare_multipliers(model, fp.z))
+        ev = ev[np.argsort(-np.abs(ev))]
+        radius = float(np.max(np.abs(ev)))
+        rec.update(period=float(fp.periods[0]), multipliers=ev,
+                   spectral_radius=radius, stable=radius < 1.0)
+    if args.json:
+        print_json(rec)
+    else:
+        print(f"kneed walker gait at {args.slope_deg} deg (shooting): {result}")
+        if result == "successful":
+            print("  z = (q1, dq1, dq2) = " + ", ".join(f"{v:.8f}" for v in rec["z"]))
+            print(f"  period {rec['period']:.8f} s, multipliers "
+                  + ", ".join(f"{complex(v):.5f}" for v in rec["multipliers"])
+                  + f" ({'stable' if rec['stable'] else 'unstable'})")
+    return 0 if result == "successful" else 1
 
 
 def sweep_row(gait, i, slope_deg):

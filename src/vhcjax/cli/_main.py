@@ -6,6 +6,7 @@ bad input becomes a one-line message and exit status 2 instead of a traceback.
 
 import argparse
 import importlib
+import os
 import sys
 
 from ._common import CLIError
@@ -34,6 +35,7 @@ def build_parser():
 
 
 def main(argv=None):
+    os.environ.setdefault("MPLBACKEND", "Agg")  # figures go to files
     parser = build_parser()
     args = parser.parse_args(argv)
     try:

@@ -26,7 +26,6 @@ from ._vhc import (
 
 from ._problem1 import (
     BoundaryData as BoundaryData,
-    energy_gap as energy_gap,
     impact_configuration as impact_configuration,
     impact_velocity_matrix as impact_velocity_matrix,
     quadratic_coefficients as quadratic_coefficients,

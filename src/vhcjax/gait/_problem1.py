@@ -104,18 +104,9 @@ def _states_from(data, b, d):
     return x_plus, x_minus
 
 
-def _states(model, a, b, d):
-    return _states_from(_impact_data(model, a), b, d)
-
-
 def _energy_gap(model, data, b, d):
     x_plus, x_minus = _states_from(data, b, d)
     return model.energy(x_minus) - model.energy(x_plus)
-
-
-def energy_gap(model, a, b, d):
-    """$E(c, d) - E(a, b)$ with $c, e, f, g, h$ eliminated (thesis 5.12-5.13)."""
-    return _energy_gap(model, _impact_data(model, a), b, d)
 
 
 def _quadratic(model, data, b):

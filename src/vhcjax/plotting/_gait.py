@@ -1,9 +1,11 @@
 """Gait-family figure: a, b, T and walking speed against slope, for both families.
 
-matplotlib is imported lazily (Agg backend).
+matplotlib is imported when the figure is drawn.
 """
 
 import numpy as np
+
+from ._common import pyplot
 
 _STYLE = {"stable": dict(color="C0", ls="-"), "unstable": dict(color="C3", ls="--")}
 
@@ -12,10 +14,7 @@ def plot_sweep(sweeps, path=None):
     """Plot the gaits of `sweeps` (`{"stable": Sweep, "unstable": Sweep}`, either may be
     missing) against slope; failed slopes are left out. Returns the figure; saved to
     `path` if given."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    plt = pyplot()
 
     fig, axes = plt.subplots(2, 2, figsize=(9, 6.5), sharex=True)
     panels = [

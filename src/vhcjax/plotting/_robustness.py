@@ -1,15 +1,10 @@
-"""Figures for the robustness analyses (matplotlib, Agg backend, imported lazily)."""
+"""Figures for the robustness analyses (matplotlib, imported when a figure is drawn)."""
 
 import numpy as np
 
+from ._common import pyplot
 
-def _plt():
-    import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 SECTION_LABELS = (r"$q_1$ (rad)", r"$\dot q_1$ (rad/s)", r"$\dot q_2$ (rad/s)")
@@ -21,7 +16,7 @@ def plot_basin(b, path, title=None):
     undecided white; the gait marked by a star (compare Schwab and Wisse 2001)."""
     from matplotlib.colors import ListedColormap
 
-    plt = _plt()
+    plt = pyplot()
     from ..robustness import CONVERGED, FELL, OTHER_CYCLE, UNDECIDED
 
     ix, iy = b.axes
@@ -55,7 +50,7 @@ def plot_basin(b, path, title=None):
 
 def plot_contraction(c, path):
     """Simulated recovery errors vs step with the multiplier prediction $\\rho^k$."""
-    plt = _plt()
+    plt = pyplot()
     d = np.asarray(c.distance)
     k = np.arange(d.shape[1])
     fig, ax = plt.subplots(figsize=(6.4, 4.2), dpi=130)
@@ -78,7 +73,7 @@ def plot_contraction(c, path):
 
 def plot_terrain(heights, rec, period, path, gsn=None):
     """Step times and distance to the gait after a floor step of each height."""
-    plt = _plt()
+    plt = pyplot()
     T = np.asarray(rec.step_times)
     d = np.asarray(rec.distance)
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4), dpi=130)
@@ -109,7 +104,7 @@ def plot_terrain(heights, rec, period, path, gsn=None):
 def plot_push(phases, sens, angles, largest, path, unit="N s", p_max=None):
     """Left: norm of the post-impact state's sensitivity to a unit hip impulse vs phase
     (forward and upward). Right: largest push survived vs phase, per direction."""
-    plt = _plt()
+    plt = pyplot()
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4), dpi=130)
     S = np.asarray(sens)
     a1.plot(phases, np.linalg.norm(S[:, :, 0], axis=1), "o-", ms=3, label="horizontal (+x)")
@@ -134,7 +129,7 @@ def plot_push(phases, sens, angles, largest, path, unit="N s", p_max=None):
 
 def plot_slope(sens, path):
     """Bar chart of the slope derivatives (per degree) of the gait quantities."""
-    plt = _plt()
+    plt = pyplot()
     deg = np.pi / 180
     names = [r"$q_1^*$", r"$\dot q_1^*$", r"$\dot q_2^*$", "T", "L", "v", r"$|\lambda_1|$",
              r"$|\lambda_3|$"]

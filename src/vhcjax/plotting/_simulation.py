@@ -8,21 +8,15 @@ when no backend has been chosen, so importing vhcjax never needs a display.
 
 import numpy as np
 
+from ._common import pyplot
 
-def _plt():
-    import matplotlib
 
-    if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
-        matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def _done(fig, path):
     if path is not None:
         fig.savefig(path, dpi=110, bbox_inches="tight")
-        _plt().close(fig)
+        pyplot().close(fig)
     return fig
 
 
@@ -49,7 +43,7 @@ def plot_states(sim, axes=None, path=None):
 
     **Returns:** the matplotlib figure.
     """
-    plt = _plt()
+    plt = pyplot()
     k, t, x = _completed(sim)
     if axes is None:
         fig, axes = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
@@ -79,7 +73,7 @@ def plot_phase_portrait(sim, ax=None, path=None):
 
     **Returns:** the matplotlib figure.
     """
-    plt = _plt()
+    plt = pyplot()
     k, _, x = _completed(sim)
     if ax is None:
         fig, ax = plt.subplots(figsize=(5.5, 4.5))
@@ -107,7 +101,7 @@ def plot_step_periods(sim, ax=None, path=None):
 
     **Returns:** the matplotlib figure.
     """
-    plt = _plt()
+    plt = pyplot()
     k = int(sim.num_successful)
     T = np.asarray(sim.steps.period)[:k]
     if ax is None:
@@ -189,7 +183,7 @@ def plot_walker(sim, model, frame=0, ax=None, path=None):
 
     **Returns:** the matplotlib figure.
     """
-    plt = _plt()
+    plt = pyplot()
     frames = walker_frames(sim, model)
     if ax is None:
         fig, ax = plt.subplots(figsize=(6, 3.2))
@@ -211,7 +205,7 @@ def animate(sim, model, path, *, fps=None, max_frames=300):
 
     **Returns:** the number of frames written.
     """
-    plt = _plt()
+    plt = pyplot()
     from matplotlib.animation import FuncAnimation, PillowWriter
 
     frames = walker_frames(sim, model)

@@ -6,14 +6,9 @@ matplotlib is imported lazily (Agg backend): the library does not need it otherw
 
 import numpy as np
 
+from ._common import pyplot
 
-def _plt():
-    import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt
 
 
 def plot_multipliers_complex(sets, labels=None, path=None, title=None):
@@ -23,7 +18,7 @@ def plot_multipliers_complex(sets, labels=None, path=None, title=None):
     gait, or several gaits); `labels`: legend entries. Returns the figure; saved to
     `path` if given.
     """
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(5, 5))
     t = np.linspace(0, 2 * np.pi, 400)
     ax.plot(np.cos(t), np.sin(t), color="0.5", lw=1, label="unit circle")
@@ -57,7 +52,7 @@ def plot_multipliers_vs_slope(slopes_deg, families, path=None):
 
     `families`: dict name -> complex array (B, 2n-1) of multipliers at `slopes_deg`.
     """
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 4.2))
     styles = {0: "-", 1: "--", 2: ":"}
     colors = ["C0", "C3", "C2", "C1"]
@@ -101,7 +96,7 @@ def plot_bifurcation(diagram, branches=(), path=None, flips_deg=()):
       overlaid (solid stable, dashed unstable).
     - `flips_deg`: slopes of period doubling, marked by thin vertical lines.
     """
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 5))
     deg = np.degrees(np.asarray(diagram.psi))
     P = np.asarray(diagram.periods)

@@ -368,9 +368,6 @@ def reproduce(out_dir, quick=False, progress=None):
     """Recompute thesis chapter 7 and the library's analyses; write figures,
     `report.md` and `results.json` to `out_dir`. `progress`: a tqdm-like bar (one
     `update(1)` per section). **Returns:** the results dict."""
-    import matplotlib
-
-    matplotlib.use("Agg")
     os.makedirs(out_dir, exist_ok=True)
     mode = "quick" if quick else "full"
     S = SIZES[mode]

@@ -6,7 +6,6 @@ from ._multipliers import (
     add_stability_columns as add_stability_columns,
     bifurcation_diagram as bifurcation_diagram,
     BifurcationDiagram as BifurcationDiagram,
-    count_distinct as count_distinct,
     CSV_COLUMNS as CSV_COLUMNS,
     detect_period as detect_period,
     Family as Family,

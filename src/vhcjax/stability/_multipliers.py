@@ -425,12 +425,6 @@ def _long_runs(model, psis, x0s, num_steps, num_record, config):
     return jax.vmap(one)(psis, x0s)
 
 
-def count_distinct(periods, tol=1e-6):
-    """Number of distinct values in `periods` (clusters closer than `tol`)."""
-    p = np.sort(np.asarray(periods))
-    return int(1 + np.sum(np.diff(p) > tol))
-
-
 def bifurcation_diagram(psis, zs, *, model=None, num_transient=300, num_record=64,
                         perturbation=1e-4, config=FAST_CONFIG, chunk=None, mesh=None):
     """Simulate from the period-1 gaits `zs` at slopes `psis` (rad) for
