@@ -123,10 +123,28 @@ def _seed(sign, method):
     return ab if method == "vhc" else complete_guess_jit(ref, ab, sign)
 
 
-def continue_to_model(model, family="stable", method="vhc", num=_HOMOTOPY_STEPS):
+#: Largest relative change of a physical parameter in one homotopy step (`num=None`).
+_HOMOTOPY_RATIO = 0.015
+
+
+def _homotopy_steps(start, end):
+    """Steps of the homotopy from `start` to `end`: at least `_HOMOTOPY_STEPS`, and enough
+    that no parameter changes by more than `_HOMOTOPY_RATIO` (relative) in one step."""
+    import numpy as np
+
+    spread = max(
+        float(np.max(np.abs(np.log(np.asarray(getattr(end, name), float)
+                                    / np.asarray(getattr(start, name), float)))))
+        for name in _HOMOTOPY_LEAVES
+    )
+    return max(_HOMOTOPY_STEPS, int(np.ceil(spread / np.log1p(_HOMOTOPY_RATIO))) + 1)
+
+
+def continue_to_model(model, family="stable", method="vhc", num=None):
     """The `family` gait of `model` without a guess: homotopy from the default model at
     3 degrees (thesis Table 1, `reference_model`) to `model`, all physical parameters at
-    once (geometric interpolation), in `num` steps with a tangent predictor.
+    once (geometric interpolation), in `num` steps with a tangent predictor (`None`: at
+    least 16, and no parameter changing by more than 1.5 % in a step).
 
     **Returns:** a `Gait` (never raises; check `result`).
     """
@@ -134,6 +152,8 @@ def continue_to_model(model, family="stable", method="vhc", num=_HOMOTOPY_STEPS)
 
     _check(family, method)
     sign = family_sign(family)
+    if num is None:
+        num = _homotopy_steps(reference_model(), model)
     gaits, _ = _run_continuation(
         reference_model(), model, np.linspace(0.0, 1.0, num), _seed(sign, method), sign, method
     )

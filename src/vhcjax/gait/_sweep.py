@@ -1,4 +1,10 @@
-"""Slope sweeps: a family of gaits over many slopes by continuation."""
+"""Slope sweeps: a family of gaits over many slopes.
+
+A coarse continuation over a few anchor slopes (tangent predictor) predicts the gait at
+every slope by Hermite interpolation of the anchors' gaits and tangents; the batched
+Newton search (`find_gaits`) then solves the whole slope vector at once, and slopes it
+misses are retried from their nearest solved neighbour.
+"""
 
 import math
 
@@ -6,15 +12,13 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._batching import bucket_size, host_workers, in_chunks
 from .._results import RESULTS
-from ._continuation import _run_continuation
-from ._continuation import _unknowns
-from ._continuation import continue_to_model
+from ._continuation import _run_continuation, _tangent, _unknowns, continue_to_model
 from ._dispatch import _check
 from ._dispatch import _relabel
-from ._gait import Gait
-from ._gait import _REFERENCE_PSI
-from ._gait import family_sign
+from ._find import find_gaits
+from ._gait import _REFERENCE_PSI, Gait, family_sign
 from ._problem1 import _with_psi
 
 
@@ -35,6 +39,7 @@ class Sweep(eqx.Module):
 
     @property
     def ok(self):
+        """Where the gait was found."""
         return self.gaits.result == RESULTS.successful
 
     def ends(self):
@@ -61,7 +66,7 @@ class Sweep(eqx.Module):
                 "singular_phi_ode": "the phi'' ODE becomes singular along the arc",
                 "infeasible_uphill": "the solution turned into an uphill (negative-time) one",
             }.get(names[i], names[i])
-            if names[i] == "not_converged" and tan is not None and tan[prev] > 50:
+            if names[i] == "not_converged" and tan is not None and tan[prev] > _FOLD_TANGENT:
                 reason = f"fold: |dz*/dpsi| = {tan[prev]:.3g} at the last gait found"
             out.append(
                 {"slope_deg": float(deg[i]), "last_slope_deg": float(deg[prev]),
@@ -70,39 +75,168 @@ class Sweep(eqx.Module):
         return out
 
 
-def sweep(model, slopes, family="stable", method="vhc"):
-    """The `family` gait along the slopes `slopes` (rad) by continuation.
+#: Largest slope step (rad) between anchors of the coarse continuation.
+ANCHOR_STEP = math.radians(0.1)
+#: Rounds of retries of the slopes the batched search missed.
+_RETRIES = 4
+#: $|dz^*/d\psi|$ above which a missed slope next to a found one is reported as a fold.
+_FOLD_TANGENT = 50.0
 
-    Starts at the slope closest to 3 degrees (reached from the reference gait by
-    homotopy in the model parameters, so no guess is needed), then follows the family
-    up and down the slope vector with a tangent predictor ($dz^*/d\\psi$ by implicit
-    differentiation), each direction one jitted loop. Slopes where the family is not
-    found keep their failure code; the next slope is predicted from the last success,
-    so an isolated failure does not end the sweep. `Sweep.ends()` says where and why
-    the family ends. Give the slopes in order (increasing or decreasing).
 
-    **Returns:** a `Sweep` (`tangent` is $dz^*/d\\psi$).
+def _anchor_grid(start, stop, step):
+    """Slopes from `start` to `stop` (either direction) in equal steps of at most `step`."""
+    import numpy as np
+
+    n = max(1, int(np.ceil(abs(stop - start) / step - 1e-9)))
+    return np.linspace(start, stop, n + 1)
+
+
+def _hermite(ps, pa, za, ta):
+    """Cubic Hermite interpolation of the anchors' gaits `za` and slopes `ta` (with respect
+    to psi) at the sorted slopes `ps`; outside the anchors, the tangent line of the
+    nearest one."""
+    import numpy as np
+
+    j = np.clip(np.searchsorted(pa, ps) - 1, 0, len(pa) - 2) if len(pa) > 1 else None
+    if j is None:
+        return za[0] + ta[0] * (ps - pa[0])[:, None]
+    h = (pa[j + 1] - pa[j])[:, None]
+    t = ((ps - pa[j])[:, None]) / h
+    z = ((2 * t**3 - 3 * t**2 + 1) * za[j] + (t**3 - 2 * t**2 + t) * h * ta[j]
+         + (-2 * t**3 + 3 * t**2) * za[j + 1] + (t**3 - t**2) * h * ta[j + 1])
+    below, above = ps < pa[0], ps > pa[-1]
+    z[below] = za[0] + ta[0] * (ps[below] - pa[0])[:, None]
+    z[above] = za[-1] + ta[-1] * (ps[above] - pa[-1])[:, None]
+    return z
+
+
+@eqx.filter_jit
+def _tangents_padded(model, psis, zs, sign, method):
+    def one(p, z):
+        return _tangent(lambda q: _with_psi(model, q), p, z, sign, method)
+
+    return jax.vmap(one)(psis, zs)
+
+
+def _tangents(model, psis, zs, sign, method):
+    """$dz^*/d\psi$ at every slope (implicit differentiation, batched like `find_gaits`)."""
+    import numpy as np
+
+    n = len(psis)
+    chunk = min(bucket_size(n), 256)
+
+    def part(i, j):
+        m = j - i
+        pad = chunk - m
+        p = np.concatenate([psis[i:j], np.full(pad, psis[i])])
+        z = np.concatenate([zs[i:j], np.repeat(zs[i:i + 1], pad, axis=0)])
+        return _tangents_padded(model, jnp.asarray(p), jnp.asarray(z), sign, method)[:m]
+
+    return np.asarray(in_chunks(part, n, chunk, host_workers()))
+
+
+def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_STEP):
+    """The `family` gait at every slope of `slopes` (rad).
+
+    1. The gait of `model` at 3 degrees, from the reference gait by homotopy in the
+       model parameters (no guess needed).
+    2. A continuation with a tangent predictor from there to both ends of the slope
+       range, over anchor slopes at most `anchor_step` apart.
+    3. Every slope at once by the batched Newton search (`find_gaits`), from the cubic
+       Hermite interpolation of the anchors' gaits and tangents $dz^*/d\psi$.
+    4. Slopes the batch missed are retried from their nearest solved slope (its gait and
+       tangent), a few rounds.
+
+    The slopes may come in any order. `Sweep.ends()` says where and why the family ends.
+
+    **Returns:** a `Sweep` (`tangent` is $dz^*/d\psi$, zero where no gait was found).
     """
     import numpy as np
 
     _check(family, method)
     psi = np.asarray(slopes, dtype=float).reshape(-1)
-    k = int(np.argmin(np.abs(psi - _REFERENCE_PSI)))
+    if psi.size == 0:
+        raise ValueError("sweep needs at least one slope")
+    if not np.all(np.isfinite(psi)) or np.any(psi <= 0):
+        raise ValueError("sweep: slopes must be finite and positive (rad)")
+    order = np.argsort(psi, kind="stable")
+    ps = psi[order]
     sign = family_sign(family)
-    anchor_model = _with_psi(model, psi[k])
-    anchor = continue_to_model(anchor_model, family, method)
-    z0 = _unknowns(anchor, method)
-    # Slope path psi = psi_k * e^s: s = log(psi / psi_k).
-    end = _with_psi(model, psi[k] * math.e)
-    up, t_up = _run_continuation(anchor_model, end, np.log(psi[k:] / psi[k]), z0, sign, method)
-    parts, tans = [up], [t_up]
-    if k > 0:
-        down, t_down = _run_continuation(
-            anchor_model, end, np.log(psi[k::-1] / psi[k]), z0, sign, method
-        )
-        rev = jax.tree_util.tree_map(lambda x: x[1:][::-1], down)
-        parts, tans = [rev, up], [t_down[1:][::-1], t_up]
-    gaits = jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
-    # d/dpsi = (d/ds) / psi on this path.
-    tangent = jnp.concatenate(tans) / jnp.asarray(psi)[:, None]
-    return Sweep(jnp.asarray(psi), _relabel(gaits, family), tangent)
+    # 1. the gait at 3 degrees (the reference slope) for this model
+    p0 = _REFERENCE_PSI
+    anchor_model = _with_psi(model, p0)
+    z0 = _unknowns(continue_to_model(anchor_model, family, method), method)
+
+    # 2. coarse continuation from there over the slope range (path psi = p0 e^s)
+    end = _with_psi(model, p0 * math.e)
+    pa, za, ta = [], [], []
+    for grid in (_anchor_grid(p0, max(ps[-1], p0), anchor_step),
+                 _anchor_grid(p0, min(ps[0], p0), anchor_step)):
+        g, t = _run_continuation(anchor_model, end, np.log(grid / p0), z0, sign, method)
+        ok = np.asarray(g.result._value) == RESULTS.successful._value
+        # A sequential continuation past a failure is unreliable: keep the run up to it.
+        n_ok = len(ok) if ok.all() else int(np.argmin(ok))
+        z = np.asarray(jax.vmap(lambda gg: _unknowns(gg, method))(g))
+        pa += list(grid[:n_ok])
+        za += list(z[:n_ok])
+        ta += list(np.asarray(t)[:n_ok] / grid[:n_ok, None])  # d/dpsi = (d/ds) / psi
+    if not pa:  # not even the first anchor: nothing to predict from
+        gaits = find_gaits(model, np.repeat(np.asarray(z0)[None], len(ps), 0), family, method,
+                           psi=jnp.asarray(ps))
+        tangent = np.zeros((len(ps), len(z0)))
+    else:
+        pa, uniq = np.unique(np.asarray(pa), return_index=True)
+        za, ta = np.asarray(za)[uniq], np.asarray(ta)[uniq]
+        # 3. every slope at once
+        guesses = _hermite(ps, pa, za, ta)
+        gaits = find_gaits(model, jnp.asarray(guesses), family, method, psi=jnp.asarray(ps))
+        gaits, tangent = _retry(model, ps, gaits, family, method, sign, anchor_step)
+    inverse = np.empty_like(order)
+    inverse[order] = np.arange(len(order))
+    gaits = jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x)[inverse]), gaits)
+    gaits = _relabel(gaits, family)
+    return Sweep(jnp.asarray(psi), gaits, jnp.asarray(tangent[inverse]))
+
+
+def _retry(model, ps, gaits, family, method, sign, reach):
+    """4. Re-solve the missed slopes within `reach` of a solved one, from the nearest
+    solved slope's gait and tangent, until a round finds nothing new. **Returns:** the
+    gaits and the tangents at every slope (zero where missed)."""
+    import numpy as np
+
+    unknowns = jax.vmap(lambda g: _unknowns(g, method))
+    Z = np.array(unknowns(gaits))
+    ok = np.asarray(gaits.result._value) == RESULTS.successful._value
+    T = np.zeros_like(Z)
+    T[ok] = _tangents(model, ps[ok], Z[ok], sign, method)
+    for _ in range(_RETRIES):
+        if ok.all() or not ok.any():
+            break
+        good = np.where(ok)[0]
+        miss = np.where(~ok)[0]
+        near = good[np.argmin(np.abs(ps[good][None, :] - ps[miss][:, None]), axis=1)]
+        adjacent = np.isin(miss - 1, good) | np.isin(miss + 1, good)
+        close = (np.abs(ps[miss] - ps[near]) <= 2 * reach) | adjacent
+        miss, near = miss[close], near[close]
+        if miss.size == 0:
+            break
+        guess = Z[near] + T[near] * (ps[miss] - ps[near])[:, None]
+        again = find_gaits(model, jnp.asarray(guess), family, method, psi=jnp.asarray(ps[miss]))
+        found = np.asarray(again.result._value) == RESULTS.successful._value
+        if not found.any():
+            break
+        take, rows = miss[found], np.where(found)[0]
+        gaits = jax.tree_util.tree_map(lambda a, b: _put(a, take, np.asarray(b)[rows]),
+                                       gaits, again)
+        Z[take] = np.asarray(unknowns(again))[rows]
+        T[take] = _tangents(model, ps[take], Z[take], sign, method)
+        ok[take] = True
+    return gaits, T
+
+
+def _put(a, idx, values):
+    import numpy as np
+
+    out = np.array(a, copy=True)
+    out[idx] = values
+    return out
