@@ -41,16 +41,28 @@ def test_slopes_in_any_order_and_far_from_three_degrees():
 
 
 def test_real_ends_are_reported_with_their_cause():
-    # The unstable family loses its real root (5.13) past about 14 degrees.
-    deg = np.arange(13.5, 14.6, 0.1)
-    ends = vj.sweep(vj.CompassGait(), np.radians(deg), "unstable").ends()
-    assert [e["result"] for e in ends] == ["no_real_root"]
+    # The unstable family loses its real root (5.13) between 14.7 and 14.8 degrees.
+    deg = np.array([13.0, 14.0, 15.0, 16.0])
+    sw = vj.sweep(vj.CompassGait(), np.radians(deg), "unstable")
+    assert vj.result_names(sw.gaits.result) == ["successful"] * 2 + ["no_real_root"] * 2
+    ends = sw.ends()
+    assert [(e["last_slope_deg"], e["slope_deg"], e["result"]) for e in ends] == [
+        (14.0, 15.0, "no_real_root")]
     assert "no real root" in ends[0]["reason"]
-    # A light hip on heavy legs: the phi'' ODE of the stable family becomes singular.
-    heavy = vj.CompassGait(mH=0.1, m1=10.0, m2=10.0)
-    sw = vj.sweep(heavy, np.radians([2.8, 3.0]), "stable")
-    names = vj.result_names(sw.gaits.result)
-    assert set(names) == {"singular_phi_ode"} and sw.ends() == []  # nothing found: no end
+    # A light hip (1 kg on 5 kg legs): the phi'' ODE of the stable family becomes
+    # singular between 4 and 4.5 degrees.
+    sw = vj.sweep(vj.CompassGait(mH=1.0), np.radians([3.5, 4.0, 4.5, 5.0]), "stable")
+    assert vj.result_names(sw.gaits.result) == ["successful"] * 2 + ["singular_phi_ode"] * 2
+    ends = sw.ends()
+    assert [(e["last_slope_deg"], e["result"]) for e in ends] == [(4.0, "singular_phi_ode")]
+    # Where the VHC search cannot run at all (a lighter hip still), no end is invented,
+    # and shooting finds the gaits the singular phi'' ODE hides.
+    light = vj.CompassGait(mH=0.1, m1=10.0, m2=10.0)
+    psi = np.radians([2.5, 3.0])
+    assert set(vj.result_names(vj.sweep(light, psi, "stable").gaits.result)) <= {
+        "singular_phi_ode", "not_converged"}
+    assert vj.result_names(vj.sweep(light, psi, "stable", "shooting").gaits.result) == [
+        "successful"] * 2
 
 
 def test_a_missed_slope_is_retried_from_its_neighbour():

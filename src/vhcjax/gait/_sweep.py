@@ -119,7 +119,7 @@ def _tangents_padded(model, psis, zs, sign, method):
 
 
 def _tangents(model, psis, zs, sign, method):
-    """$dz^*/d\psi$ at every slope (implicit differentiation, batched like `find_gaits`)."""
+    r"""$dz^*/d\psi$ at every slope (implicit differentiation, batched like `find_gaits`)."""
     import numpy as np
 
     n = len(psis)
@@ -136,7 +136,7 @@ def _tangents(model, psis, zs, sign, method):
 
 
 def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_STEP):
-    """The `family` gait at every slope of `slopes` (rad).
+    r"""The `family` gait at every slope of `slopes` (rad).
 
     1. The gait of `model` at 3 degrees, from the reference gait by homotopy in the
        model parameters (no guess needed).
