@@ -9,6 +9,8 @@ import optimistix as optx
 
 #: Trial tolerance of the inexact Newton iterations: this times the squared residual.
 _TOL_FACTOR = 1e-4
+#: Bound on the global error of a residual integrated at tolerance `tol`: this times `tol`.
+_ERROR_FACTOR = 100.0
 
 
 def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10,
@@ -136,7 +138,7 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
 
     def make_body(evaluate, active):
         def body(carry):
-            X, R, J, aux, k, trials, done, lam, chord = carry
+            X, R, J, aux, k, trials, done, lam, chord, tol_R = carry
             first = k < 0  # the first pass only evaluates R, J at the guesses
             # Trial step from the accepted point (X, R, J): Newton, or damped after a failure.
             Jt = jnp.swapaxes(J, -1, -2)
@@ -151,9 +153,14 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
             stuck = ~first & ~newton & ~(norm(dX) > 0)
             tol = trial_tolerance(R, first)
             R_t, J_t, aux_t = evaluate(X - dX, tol, J)
+            # A residual integrated more accurately than the accepted one may exceed it by
+            # the accepted one's integration error: such a trial is accepted too (else a
+            # member can stop at a loose residual that an exact one cannot beat).
+            tightened = tol < tol_R
             improved = first | (
                 jnp.isfinite(R_t).all(-1) & jnp.isfinite(J_t).all((-2, -1))
-                & (jnp.sum(R_t**2, -1) < jnp.sum(R**2, -1))
+                & ((jnp.sum(R_t**2, -1) < jnp.sum(R**2, -1))
+                   | (tightened & (norm(R_t) <= norm(R) + _ERROR_FACTOR * tol_R)))
             )
             X_new, R_new, J_new, aux_new = pick(improved, (X - dX, R_t, J_t, aux_t), (X, R, J, aux))
             size = atol + rtol * norm(X - dX)
@@ -169,8 +176,9 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
             lam_start = 1e-3 * norm(jnp.diagonal(JtJ, axis1=-2, axis2=-1))
             lam_new = jnp.where(improved, 0.0, jnp.where(newton, lam_start, 10.0 * lam))
             trials_new = jnp.where(improved, 0, jnp.where(stuck, max_trials, trials + 1))
+            tol_new = jnp.where(improved, tol * jnp.ones_like(tol_R), tol_R)
             new = (X_new, R_new, J_new, aux_new, k + improved, trials_new, done_new, lam_new,
-                   chord_new)
+                   chord_new, tol_new)
             return pick(active(carry), new, carry)  # stopped members keep their state
 
         return body
@@ -189,7 +197,7 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
         )
 
     init = (X0, zeros(R_shape), zeros(J_shape), zeros(aux_shape),
-            tie.astype(int) - 1, tie.astype(int), tie != 0, tie, tie != 0)
+            tie.astype(int) - 1, tie.astype(int), tie != 0, tie, tie != 0, tol0)
     carry = jax.lax.while_loop(
         lambda c: jnp.any(iterating(c)), make_body(evaluate, iterating), init
     )
