@@ -3,6 +3,7 @@ gait equals the single-gait search, and only real ends are reported."""
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -71,11 +72,9 @@ def test_a_missed_slope_is_retried_from_its_neighbour():
     psi = np.radians(np.array([2.9, 3.0, 3.1]))
     model = vj.CompassGait()
     good = vj.find_gaits(model, jnp.array([[0.2, -1.0]] * 3), "stable", psi=jnp.asarray(psi))
-    missed = jax.tree_util.tree_map(lambda x: x, good)
-    missed = missed.__class__(**{**{f: getattr(good, f) for f in good.__dataclass_fields__},
-                                 "result": vj.RESULTS.where(jnp.arange(3) == 1,
-                                                            vj.RESULTS.not_converged,
-                                                            good.result)})
+    code = jax.vmap(lambda p, r: vj.RESULTS.where(p, vj.RESULTS.not_converged, r))(
+        jnp.arange(3) == 1, good.result)
+    missed = eqx.tree_at(lambda g: g.result, good, code)
     sign = vj.gait.family_sign("stable")
     fixed, tangent = _sweep._retry(model, psi, missed, "stable", "vhc", sign, math.radians(0.1))
     assert vj.result_names(fixed.result) == ["successful"] * 3
