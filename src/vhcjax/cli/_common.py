@@ -118,9 +118,17 @@ def print_json(obj):
     print(json.dumps(to_jsonable(obj)))
 
 
+#: Set by `--quiet` (every command has it): no progress bars, no notes on stderr.
+QUIET = {"on": False}
+
+
 def progress(iterable=None, total=None, desc=None, disable=None):
-    """A tqdm progress bar on stderr (silent when stderr is not a terminal and in CI)."""
+    """A tqdm progress bar on stderr (silent with `--quiet`, when stderr is not a terminal
+    and in CI)."""
     from tqdm import tqdm
+
+    if QUIET["on"]:
+        disable = True
 
     return tqdm(iterable, total=total, desc=desc, file=sys.stderr, leave=False,
                 disable=disable, dynamic_ncols=True)

@@ -19,7 +19,7 @@ import optimistix as optx
 from ._event_solve import solve_to_event
 from .. import trig
 from .._results import RESULTS
-from .._batching import round_to_devices, shard_batch
+from .._batching import host_workers, in_chunks, round_to_devices, shard_batch
 
 
 class SolverConfig(NamedTuple):
@@ -351,9 +351,10 @@ def simulate_batch(model, x0, num_steps, *, config=DEFAULT_CONFIG, mesh=None):
     """Simulate a batch of walkers of one model, spread over all devices.
 
     The batch is padded to a multiple of the device count and split over the `"batch"`
-    axis of `mesh` (default: all local devices, e.g. several GPUs, or several CPU devices
-    with `XLA_FLAGS=--xla_force_host_platform_device_count=N`); with one device this is
-    `jit(vmap(simulate))`. Results agree with unbatched `simulate` calls to rounding.
+    axis of `mesh` (default: all local devices, e.g. several GPUs). On a CPU, where XLA
+    runs one program on one core, the batch is also split into one chunk per core, run
+    concurrently from host threads (`VHCJAX_HOST_WORKERS` sets their number). Results
+    agree with unbatched `simulate` calls to rounding.
 
     **Arguments:**
 
@@ -371,8 +372,14 @@ def simulate_batch(model, x0, num_steps, *, config=DEFAULT_CONFIG, mesh=None):
             f"x0 must have shape (batch, {2 * model.n_dof}) with batch >= 1, got {x0.shape}"
         )
     n = x0.shape[0]
-    pad = round_to_devices(n, mesh) - n
-    if pad:
-        x0 = jnp.concatenate([x0, jnp.repeat(x0[-1:], pad, axis=0)])
-    sim = _simulate_many(model, shard_batch(x0, mesh), num_steps, config)
-    return jax.tree_util.tree_map(lambda a: a[:n], sim)
+    workers = min(host_workers(mesh), n)
+    chunk = round_to_devices(-(-n // workers), mesh)  # every chunk the same size: one program
+
+    def run(i, j):
+        part = x0[i:j]
+        if j - i < chunk:
+            part = jnp.concatenate([part, jnp.repeat(part[-1:], chunk - (j - i), axis=0)])
+        sim = _simulate_many(model, shard_batch(part, mesh), num_steps, config)
+        return jax.tree_util.tree_map(lambda a: a[: j - i], sim)
+
+    return in_chunks(run, n, chunk, workers)
