@@ -32,6 +32,7 @@ JOBS = [
     ("gait_search", "bench_gait_search.py", []),
     ("stability", "bench_stability.py", []),
     ("basin", "bench_basin.py", []),
+    ("cli", "bench_cli.py", []),
 ]
 
 
@@ -118,6 +119,27 @@ def _rows(name, res):
                  f"~{est:.0f} s ({_fmt(s['walker_steps_per_s'])} walker-steps/s)"
                  if est is not None else "-",
                  f"{res['speedup']:.1f}x", f"{v['compile_s']:.1f} s")]
+    if name == "cli":
+        g, sw, lib = res["gait"], res["sweep"], res["library_first_call"]
+        rows = [
+            ("`vhcjax gait --slope-deg 3 --json`, first run (empty cache)",
+             f"{g['first_s']:.1f} s", f"{g['scipy_s']:.2f} s (script)",
+             f"{g['first_ratio']:.0f}x slower", "included"),
+            ("`vhcjax gait --slope-deg 3 --json`, second run",
+             f"{g['second_s']:.1f} s", f"{g['scipy_s']:.2f} s (script)",
+             f"{g['second_ratio']:.1f}x slower", "cached"),
+            (f"`vhcjax sweep` with `--csv`, {sw['n1']:,} and {sw['n2']:,} slopes "
+             f"({sw['found2']:,} found)",
+             f"{sw['per_gait_ms']:.2f} ms/gait + {sw['fixed_s']:.1f} s",
+             f"{sw['scipy_per_gait_ms']:.1f} ms/gait (fsolve continuation)",
+             f"{sw['ratio']:.0f}x", f"{sw['cold_fixed_s']:.1f} s fixed, empty cache"),
+            ("fresh Python process: `find_gait` + `gait_multipliers` at 3 deg",
+             f"{lib['wall_s']:.1f} s", "-", "-", "cached"),
+        ]
+        for name_, t in res["commands"].items():
+            rows.append((f"`vhcjax {name_}`, second run", "failed" if t is None else
+                         f"{t:.1f} s", "-", "-", "cached"))
+        return rows
     raise ValueError(name)
 
 
