@@ -1,0 +1,200 @@
+"""Closed-loop analysis of a gait stabilized by transverse-linearization feedback.
+
+- `stabilize`: transverse linearization, the Riccati solution both ways, the feedback
+  law, and the closed-loop multipliers both ways, in one call.
+- `closed_loop_multipliers_transverse`: eigenvalues of $J\\Phi_{cl}(1)$, the monodromy of
+  $\\dot\\zeta = (A - BK)\\zeta$ with the jump (the interpolated gains of the law itself).
+- `closed_loop_jacobian` / `closed_loop_multipliers`: the Poincare map of the walker
+  under the feedback law on the post-impact section, differentiated by forward-mode
+  autodiff through the heel-strike event (independent of the linearization).
+- `closed_loop_basin`: a 2-D slice of the basin of attraction on the post-impact
+  section, with the torque used per converging point.
+"""
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._compile import filter_jit
+from .._hybrid import DEFAULT_CONFIG, SolverConfig
+from .._results import RESULTS
+from ._actuated import ZeroFeedback, closed_loop_step, num_inputs, simulate_closed_loop
+from ._feedback import TransverseFeedback, transverse_feedback
+from ._riccati import RiccatiSolution, riccati_backward, riccati_hamiltonian
+from ._transverse import TransverseSystem, phase_field, phase_matrices, transverse_system
+
+
+#: Hybrid-step settings of the closed-loop Poincare map: at the default 1e-10 the
+#: autodiff Jacobian of the step map carries the ODE error (~1e-6 in the multipliers).
+TIGHT_CONFIG = SolverConfig(rtol=1e-12, atol=1e-12, max_steps=8192)
+
+
+def _sort(ev):
+    return ev[jnp.argsort(-jnp.abs(ev))]
+
+
+def closed_loop_multipliers_transverse(model, system, feedback, *, rtol=1e-12, atol=1e-12,
+                                       max_steps=8192):
+    """Closed-loop multipliers from the transverse linearization: eigenvalues of
+    $J\\,\\Phi_{cl}(1)$, $d\\Phi_{cl}/ds = (dt/ds)(A - BK(s))\\Phi_{cl}$, with $K(s)$ the
+    gain interpolant of `feedback` (saturation inactive at the orbit). Sorted by modulus.
+    """
+    r = system.w.shape[1]
+    tp, delta = system.theta_plus, system.theta_minus - system.theta_plus
+    u0 = jnp.zeros(num_inputs(model))
+
+    def field(s, y, args):
+        w = y[:r]
+        Phi = y[r:].reshape(r, r)
+        A, B, c = phase_matrices(model, tp, delta, s, w)
+        dw = phase_field(model, tp, delta, s, w, u0)[0]
+        return jnp.concatenate([dw, (c * (A - B @ feedback.gain(s)) @ Phi).reshape(-1)])
+
+    y0 = jnp.concatenate([system.w[0], jnp.eye(r).reshape(-1)])
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(field), diffrax.Tsit5(), t0=0.0, t1=1.0, dt0=None, y0=y0,
+        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        max_steps=max_steps, throw=False)
+    return _sort(jnp.linalg.eigvals(system.J @ sol.ys[-1, r:].reshape(r, r)))
+
+
+def closed_loop_step_map(model, feedback, z, config=DEFAULT_CONFIG):
+    """One step of the walker under `feedback` in post-impact section coordinates:
+    `(z_next, result)`."""
+    sr = closed_loop_step(model, model.section_to_state(z), feedback, config)
+    return model.state_to_section(sr.x_plus), sr.result
+
+
+def closed_loop_jacobian(model, feedback, z, config=TIGHT_CONFIG):
+    """Jacobian of `closed_loop_step_map` by forward-mode autodiff through the event."""
+    return jax.jacfwd(lambda zz: closed_loop_step_map(model, feedback, zz, config)[0])(z)
+
+
+def closed_loop_multipliers(model, feedback, z, config=TIGHT_CONFIG):
+    """Closed-loop multipliers as the eigenvalues of `closed_loop_jacobian`, by modulus."""
+    return _sort(jnp.linalg.eigvals(closed_loop_jacobian(model, feedback, z, config)))
+
+
+class Stabilization(eqx.Module):
+    """A gait stabilized by transverse-linearization LQR feedback.
+
+    - `system`: the `TransverseSystem` (open-loop `multipliers` included).
+    - `riccati`: the `RiccatiSolution` by backward iteration (used for the gains).
+    - `riccati_check`: the `RiccatiSolution` by the Hamiltonian monodromy.
+    - `riccati_agreement`: $\\max|X_1 - X_2| / \\max|X_1|$ over the phase grid.
+    - `feedback`: the `TransverseFeedback` law.
+    - `open_loop_multipliers`: eigenvalues of $J\\Phi$ (passive gait).
+    - `closed_loop_multipliers`: eigenvalues of the autodiff Poincare-map Jacobian of the
+      closed loop at `z`.
+    - `closed_loop_multipliers_transverse`: eigenvalues of $J\\Phi_{cl}$.
+    - `max_gain`: $\\max_s \\|K(s)\\|_\\infty$ (largest entry).
+    - `result`: the first failure among the steps above, or `successful`.
+    """
+
+    system: TransverseSystem
+    riccati: RiccatiSolution
+    riccati_check: RiccatiSolution
+    riccati_agreement: jax.Array
+    feedback: TransverseFeedback
+    open_loop_multipliers: jax.Array
+    closed_loop_multipliers: jax.Array
+    closed_loop_multipliers_transverse: jax.Array
+    max_gain: jax.Array
+    result: RESULTS
+
+
+def stabilize(model, z, Q=None, R=None, Q_jump=None, *, torque_limit=jnp.inf,
+              num_points=401, config=TIGHT_CONFIG):
+    """Stabilize the period-1 gait with post-impact section coordinates `z` by
+    transverse-linearization feedback (Shiriaev et al. 2008; Freidovich, Shiriaev and
+    Manchester 2008; Manchester 2011).
+
+    **Arguments:**
+
+    - `model`: a single-domain `WalkerModel` with an `input_matrix`.
+    - `z`: section coordinates of the gait (`model.state_to_section` of its post-impact
+      state), a fixed point of the passive step map.
+    - `Q`, `R`, `Q_jump`: LQR weights on $\\zeta$ (per second), on $u$ (per second) and on
+      $\\zeta^-$ at each impact; matrices or diagonals; default $I$, $I$, $Q$.
+    - `torque_limit`: saturation of each input (N m), default none.
+    - `num_points`: phase-grid points of the tabulated orbit and gains.
+    - `config`: `SolverConfig` of the hybrid steps (default `TIGHT_CONFIG`, 1e-12).
+
+    **Returns:** a `Stabilization`. Jittable (`eqx.filter_jit`); `throw` is not offered:
+    inspect `result`.
+    """
+    z = jnp.asarray(z, float)
+    system = transverse_system(model, model.section_to_state(z), num_points=num_points,
+                               config=config)
+    ric = riccati_backward(model, system, Q, R, Q_jump)
+    ric2 = riccati_hamiltonian(model, system, Q, R, Q_jump)
+    agree = jnp.max(jnp.abs(ric.X - ric2.X)) / jnp.max(jnp.abs(ric.X))
+    fb = transverse_feedback(system, ric, torque_limit)
+    cl_t = closed_loop_multipliers_transverse(model, system, fb)
+    cl_p = closed_loop_multipliers(model, fb, z, config)
+    code = system.result
+    for c in (ric.result, ric2.result):
+        code = RESULTS.where(code == RESULTS.successful, c, code)
+    return Stabilization(system, ric, ric2, agree, fb, system.multipliers, cl_p, cl_t,
+                         jnp.max(jnp.abs(ric.K)), code)
+
+
+class ClosedLoopBasin(eqx.Module):
+    """A 2-D slice of the basin of attraction on the post-impact section.
+
+    - `offsets_x`, `offsets_y`: grid offsets along section coordinates `axes`.
+    - `converged`: boolean grid `(nx, ny)`: within `tol` of the gait after the steps.
+    - `fell`: boolean grid: the walker failed (fall, missed strike, ...).
+    - `fraction`: converging fraction of the grid.
+    - `max_abs_torque`, `rms_torque`: per point, the largest $|u|$ over all steps and the
+      RMS of $u$ over the first step (N m).
+    - `axes`: the two section coordinates varied.
+    """
+
+    offsets_x: jax.Array
+    offsets_y: jax.Array
+    converged: jax.Array
+    fell: jax.Array
+    fraction: jax.Array
+    max_abs_torque: jax.Array
+    rms_torque: jax.Array
+    axes: tuple = eqx.field(static=True)
+
+
+def closed_loop_basin(model, feedback, z_star, *, axes=(0, 1), half_widths=(0.05, 0.3),
+                      shape=(21, 21), num_steps=30, tol=1e-4, torque_points=16,
+                      config=DEFAULT_CONFIG):
+    """Basin slice of the gait `z_star` under `feedback` (use `ZeroFeedback` for the
+    passive walker: the same code path). Jittable; all points in one `vmap`.
+
+    **Returns:** a `ClosedLoopBasin`.
+    """
+    z_star = jnp.asarray(z_star, float)
+    ox = jnp.linspace(-half_widths[0], half_widths[0], shape[0])
+    oy = jnp.linspace(-half_widths[1], half_widths[1], shape[1])
+    X, Y = jnp.meshgrid(ox, oy, indexing="ij")
+    Z = jnp.broadcast_to(z_star, X.shape + z_star.shape)
+    Z = Z.at[..., axes[0]].add(X).at[..., axes[1]].add(Y).reshape(-1, z_star.shape[0])
+
+    def one(z):
+        sim = simulate_closed_loop(model, model.section_to_state(z), feedback, num_steps,
+                                   config=config, torque_points=torque_points)
+        zf = model.state_to_section(sim.steps.x_plus[-1])
+        ok = sim.result == RESULTS.successful
+        conv = ok & (jnp.max(jnp.abs(zf - z_star)) < tol)
+        return conv, ~ok, jnp.max(sim.max_abs_torque), sim.rms_torque[0]
+
+    conv, fell, umax, urms = jax.vmap(one)(Z)
+    conv = conv.reshape(shape)
+    return ClosedLoopBasin(ox, oy, conv, fell.reshape(shape), jnp.mean(conv),
+                           umax.reshape(shape), urms.reshape(shape), tuple(axes))
+
+
+
+# Jitted entry points (models and feedback laws carry array leaves: one compilation
+# serves every slope, weight and torque limit).
+stabilize = filter_jit(stabilize)
+closed_loop_basin = filter_jit(closed_loop_basin)
+closed_loop_multipliers = filter_jit(closed_loop_multipliers)
+closed_loop_jacobian = filter_jit(closed_loop_jacobian)
