@@ -85,8 +85,9 @@ class Stabilization(eqx.Module):
     - `riccati_agreement`: $\\max|X_1 - X_2| / \\max|X_1|$ over the phase grid.
     - `feedback`: the `TransverseFeedback` law.
     - `open_loop_multipliers`: eigenvalues of $J\\Phi$ (passive gait).
-    - `closed_loop_multipliers`: eigenvalues of the autodiff Poincare-map Jacobian of the
-      closed loop at `z`.
+    - `closed_loop_jacobian`: the autodiff Jacobian of the closed-loop step map at `z`
+      (post-impact section coordinates).
+    - `closed_loop_multipliers`: its eigenvalues.
     - `closed_loop_multipliers_transverse`: eigenvalues of $J\\Phi_{cl}$.
     - `max_gain`: $\\max_s \\|K(s)\\|_\\infty$ (largest entry).
     - `result`: the first failure among the steps above, or `successful`.
@@ -98,6 +99,7 @@ class Stabilization(eqx.Module):
     riccati_agreement: jax.Array
     feedback: TransverseFeedback
     open_loop_multipliers: jax.Array
+    closed_loop_jacobian: jax.Array
     closed_loop_multipliers: jax.Array
     closed_loop_multipliers_transverse: jax.Array
     max_gain: jax.Array
@@ -125,18 +127,18 @@ def stabilize(model, z, Q=None, R=None, Q_jump=None, *, torque_limit=jnp.inf,
     inspect `result`.
     """
     z = jnp.asarray(z, float)
-    system = transverse_system(model, model.section_to_state(z), num_points=num_points,
-                               config=config)
+    system = transverse_system(model, model.section_to_state(z), num_points=num_points)
     ric = riccati_backward(model, system, Q, R, Q_jump)
     ric2 = riccati_hamiltonian(model, system, Q, R, Q_jump)
     agree = jnp.max(jnp.abs(ric.X - ric2.X)) / jnp.max(jnp.abs(ric.X))
     fb = transverse_feedback(system, ric, torque_limit)
     cl_t = closed_loop_multipliers_transverse(model, system, fb)
-    cl_p = closed_loop_multipliers(model, fb, z, config)
+    jac = closed_loop_jacobian(model, fb, z, config)
+    cl_p = _sort(jnp.linalg.eigvals(jac))
     code = system.result
     for c in (ric.result, ric2.result):
         code = RESULTS.where(code == RESULTS.successful, c, code)
-    return Stabilization(system, ric, ric2, agree, fb, system.multipliers, cl_p, cl_t,
+    return Stabilization(system, ric, ric2, agree, fb, system.multipliers, jac, cl_p, cl_t,
                          jnp.max(jnp.abs(ric.K)), code)
 
 

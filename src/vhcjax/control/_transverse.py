@@ -21,7 +21,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._hybrid import DEFAULT_CONFIG, _step
 from .._results import RESULTS
 from .._transverse import guard_normal
 from ._actuated import actuated_vector_field, num_inputs
@@ -67,6 +66,12 @@ def jump_matrix(model, x_minus):
     return S_plus @ dF @ P_minus, x_plus
 
 
+# diffrax traces a vector field several times per solve (initial step, solver state,
+# step); jitted, the later traces reuse the first one's jaxpr (as `vhcjax._transverse`).
+phase_field = eqx.filter_jit(phase_field)
+phase_matrices = eqx.filter_jit(phase_matrices)
+
+
 class TransverseSystem(eqx.Module):
     """The transverse linearization of one gait, tabulated on a uniform phase grid.
 
@@ -108,7 +113,7 @@ def _solve_code(sol):
                       RESULTS.max_steps_reached, RESULTS.nonfinite))
 
 
-def transverse_system(model, x_plus, *, num_points=401, config=DEFAULT_CONFIG):
+def transverse_system(model, x_plus, *, num_points=401):
     """Transverse linearization with input of the period-1 gait through `x_plus`.
 
     **Arguments:**
@@ -118,14 +123,16 @@ def transverse_system(model, x_plus, *, num_points=401, config=DEFAULT_CONFIG):
     - `x_plus`: post-impact state of the gait (a fixed point of the step map, e.g.
       `model.section_to_state(z)`); the orbit is passive ($u = 0$ on it).
     - `num_points`: phase-grid points (the feedback interpolates on this grid); the
-      orbit and $\Phi$ are integrated with fixed Dopri8 steps on this grid.
-    - `config`: settings of the hybrid step that locates $\\theta^-$.
+      orbit and $\\Phi$ are integrated with fixed Tsit5 steps on this grid.
 
     **Returns:** a `TransverseSystem`.
     """
     x_plus = jnp.asarray(x_plus, float)
-    sr = _step(model, x_plus, config)
-    theta_plus, theta_minus = x_plus[0], sr.x_minus[0]
+    n = model.n_dof
+    # The impact leaves the configuration unchanged and relabelling is an involution on
+    # configurations, so the pre-impact configuration is the relabelled post-impact one.
+    q_minus = model.relabel(x_plus[:n], jnp.zeros(n, x_plus.dtype))[0]
+    theta_plus, theta_minus = x_plus[0], q_minus[0]
     delta = theta_minus - theta_plus
     r = x_plus.shape[0] - 1
     m = num_inputs(model)
@@ -140,12 +147,12 @@ def transverse_system(model, x_plus, *, num_points=401, config=DEFAULT_CONFIG):
         return jnp.concatenate([dw, c[None], (c * A @ Phi).reshape(-1)])
 
     y0 = jnp.concatenate([x_plus[1:], jnp.zeros(1, x_plus.dtype), jnp.eye(r).reshape(-1)])
-    # Fixed steps of an 8th-order method landing on the grid: the tabulated orbit is then
+    # Fixed steps (Tsit5, 5th order) landing on the grid: the tabulated orbit is then
     # a smooth function of s to ~1e-14 (dense output between adaptive steps is not: its
     # error, differentiated by the feedback along the orbit, would show in the closed-loop
     # Poincare map).
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(field), diffrax.Dopri8(), t0=0.0, t1=1.0, dt0=1.0 / (num_points - 1),
+        diffrax.ODETerm(field), diffrax.Tsit5(), t0=0.0, t1=1.0, dt0=1.0 / (num_points - 1),
         y0=y0, stepsize_controller=diffrax.ConstantStepSize(),
         saveat=diffrax.SaveAt(ts=s), max_steps=num_points + 8, throw=False)
     ys = sol.ys
@@ -158,7 +165,7 @@ def transverse_system(model, x_plus, *, num_points=401, config=DEFAULT_CONFIG):
     closure = jnp.max(jnp.abs(xp - x_plus))
     ev = jnp.linalg.eigvals(J @ Phi)
     ev = ev[jnp.argsort(-jnp.abs(ev))]
-    code = RESULTS.where(sr.result == RESULTS.successful, _solve_code(sol), sr.result)
+    code = _solve_code(sol)
     finite = jnp.all(jnp.isfinite(J)) & jnp.all(jnp.isfinite(Phi)) & jnp.all(jnp.isfinite(A))
     code = RESULTS.where((code == RESULTS.successful) & ~finite, RESULTS.nonfinite, code)
     return TransverseSystem(s, theta_plus, theta_minus, w, dw, A, B, c, ys[-1, r], J, Phi,
