@@ -19,6 +19,7 @@ SUBCOMMANDS = [
     "_cli_gait",  # gait, sweep
     "_cli_bifurcation",  # bifurcation, multipliers
     "_cli_robustness",  # contraction, basin, slope-sensitivity, push
+    "_cli_stabilize",  # stabilize (transverse-linearization feedback)
     "_cli_reproduce",  # reproduce (thesis chapter 7 report)
 ]
 

@@ -39,3 +39,4 @@ from ._transverse import (
     jump_matrix as jump_matrix,
     transverse_system as transverse_system,
 )
+from ._plot import plot_stabilization as plot_stabilization

@@ -196,7 +196,31 @@ def closed_loop_basin(model, feedback, z_star, *, axes=(0, 1), half_widths=(0.05
 
 # Jitted entry points (models and feedback laws carry array leaves: one compilation
 # serves every slope, weight and torque limit).
-stabilize = filter_jit(stabilize)
+_stabilize_jit = filter_jit(stabilize)
+
+
+def _as_weights(model, Q, R, Q_jump):
+    r, m = 2 * model.n_dof - 1, num_inputs(model)
+
+    def mat(W, k):
+        W = jnp.eye(k) if W is None else jnp.asarray(W, float)
+        return jnp.diag(W) if W.ndim == 1 else W.reshape(k, k)
+
+    Q = mat(Q, r)
+    return Q, mat(R, m), Q if Q_jump is None else mat(Q_jump, r)
+
+
+def _stabilize(model, z, Q=None, R=None, Q_jump=None, *, torque_limit=jnp.inf,
+               num_points=401, config=TIGHT_CONFIG):
+    # Weights, torque limit and gait as arrays: one compiled program serves them all.
+    Q, R, Q_jump = _as_weights(model, Q, R, Q_jump)
+    return _stabilize_jit(model, jnp.asarray(z, float), Q, R, Q_jump,
+                          torque_limit=jnp.asarray(torque_limit, float),
+                          num_points=num_points, config=config)
+
+
+_stabilize.__doc__ = stabilize.__doc__
+stabilize = _stabilize
 closed_loop_basin = filter_jit(closed_loop_basin)
 closed_loop_multipliers = filter_jit(closed_loop_multipliers)
 closed_loop_jacobian = filter_jit(closed_loop_jacobian)
