@@ -184,3 +184,33 @@ def test_basin_grows_with_the_torque_limit(gaits, stabilized):
     passive = vj.closed_loop_basin(m, vj.ZeroFeedback(), z, **kw)
     assert float(passive.fraction) == fractions[0] == 0.0  # an unstable gait attracts nothing
     assert fractions == sorted(fractions) and fractions[-1] > 0.5
+
+
+def test_push_step_without_feedback_is_the_passive_impulse_step(gaits, stabilized):
+    m, z = gaits["unstable-3"]
+    x0 = m.section_to_state(z)
+    t = 0.3 * float(stabilized["unstable-3"].system.period)
+    imp = jnp.array([1.0, 0.5])
+    a = vj.closed_loop_push_step(m, vj.ZeroFeedback(), x0, t, imp)
+    b = vj.impulse_step(m, x0, t, imp)
+    assert a.result == b.result == vj.RESULTS.successful
+    np.testing.assert_allclose(np.asarray(a.x_plus), np.asarray(b.x_plus), atol=1e-9)
+
+
+@pytest.mark.slow
+def test_pushes_survived_with_and_without_feedback(gaits, stabilized):
+    m, z = gaits["unstable-3"]
+    st = stabilized["unstable-3"]
+    x0, T = m.section_to_state(z), float(st.system.period)
+    kw = dict(p_max=10.0, iterations=6, num_steps=25)
+    closed = np.asarray(vj.closed_loop_max_push(m, st.feedback, x0, T, [0.2, 0.6],
+                                                [0.0, math.pi], **kw))
+    passive = np.asarray(vj.closed_loop_max_push(m, vj.ZeroFeedback(), x0, T, [0.2, 0.6],
+                                                 [0.0, math.pi], **kw))
+    assert np.all(passive == 0.0)  # the passive walker never returns to an unstable gait
+    assert np.all(closed > 1.0)
+    # The bisection's answer against a direct run: just below survives.
+    p = 0.9 * closed[0, 0]
+    sr = vj.closed_loop_push_step(m, st.feedback, x0, 0.2 * T, jnp.array([p, 0.0]))
+    sim = vj.simulate_closed_loop(m, sr.x_plus, st.feedback, 25)
+    assert _errors(m, z, sim)[-1] < 1e-4

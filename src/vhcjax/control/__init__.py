@@ -19,8 +19,10 @@ from ._closed_loop import (
     Stabilization as Stabilization,
     closed_loop_basin as closed_loop_basin,
     closed_loop_jacobian as closed_loop_jacobian,
+    closed_loop_max_push as closed_loop_max_push,
     closed_loop_multipliers as closed_loop_multipliers,
     closed_loop_multipliers_transverse as closed_loop_multipliers_transverse,
+    closed_loop_push_step as closed_loop_push_step,
     closed_loop_step_map as closed_loop_step_map,
     stabilize as stabilize,
 )

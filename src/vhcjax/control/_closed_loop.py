@@ -17,9 +17,10 @@ import jax
 import jax.numpy as jnp
 
 from .._compile import filter_jit
-from .._hybrid import DEFAULT_CONFIG, SolverConfig
+from .._hybrid import DEFAULT_CONFIG, SolverConfig, flow
+from .._push import _finish, _swing_from, direction, impulse_velocity_jump
 from .._results import RESULTS
-from ._actuated import ZeroFeedback, closed_loop_step, num_inputs, simulate_closed_loop
+from ._actuated import closed_loop_field, closed_loop_step, num_inputs, simulate_closed_loop
 from ._feedback import TransverseFeedback, transverse_feedback
 from ._riccati import RiccatiSolution, riccati_backward, riccati_hamiltonian
 from ._transverse import TransverseSystem, phase_field, phase_matrices, transverse_system
@@ -194,6 +195,72 @@ def closed_loop_basin(model, feedback, z_star, *, axes=(0, 1), half_widths=(0.05
 
 
 
+def closed_loop_push_step(model, feedback, x0, t_push, impulse, config=DEFAULT_CONFIG,
+                          alive=True):
+    """One step of the walker under `feedback` from the post-impact state `x0`, with a hip
+    impulse `impulse` (N s, world frame) at time `t_push` into the step (as
+    `vhcjax.impulse_step`, which is the passive case). **Returns:** a `StepResult`."""
+    n = model.n_dof
+    field = closed_loop_field(model, feedback)
+    t_max = config.t_max_factor * model.time_scale
+    t_s = jnp.maximum(t_push, 1e-12)
+    alive = jnp.asarray(alive)
+    sol0 = flow(model, x0, jnp.where(alive, t_s, 1e-12), config, event=False,
+                vector_field=field)
+    xs = sol0.ys[-1]
+    x_k = xs.at[n:].add(impulse_velocity_jump(model, xs[:n], impulse))
+    bad = model.fallen(xs[:n]) | model.fallen(x_k[:n]) | ~jnp.all(jnp.isfinite(x_k))
+    x_minus, t_end, code = _swing_from(model, x_k, jnp.where(alive, t_s, 1e-12),
+                                       jnp.where(alive, t_max, 2e-12), config,
+                                       vector_field=field)
+    code = RESULTS.where(bad, RESULTS.fell, code)
+    return _finish(model, x_minus, t_end, code, x0)
+
+
+def _push_survives(model, feedback, x_star, t_push, impulse, num_steps, tol, config):
+    sr = closed_loop_push_step(model, feedback, x_star, t_push, impulse, config)
+    sim = simulate_closed_loop(model, sr.x_plus, feedback, num_steps, config=config,
+                               torque_points=0)
+    err = jnp.max(jnp.abs(model.state_to_section(sim.steps.x_plus[-1])
+                          - model.state_to_section(x_star)))
+    return (sr.result == RESULTS.successful) & (sim.result == RESULTS.successful) & (err < tol)
+
+
+def closed_loop_max_push(model, feedback, x_star, period, phases, angles, *, p_max=20.0,
+                         iterations=10, num_steps=30, tol=1e-4, config=DEFAULT_CONFIG):
+    """Largest hip impulse (N s) after which the walker under `feedback` returns within
+    `tol` of the gait in `num_steps` steps, per phase and direction (bisection on
+    $[0, p_{max}]$ assuming survival is monotone in the magnitude; `vmap` over the grid).
+
+    - `x_star`, `period`: post-impact state and step time of the gait.
+    - `phases`: fractions of `period` at which the push acts; `angles`: directions (rad,
+      0 forward, $\pi/2$ up), as `vhcjax.max_push`.
+
+    **Returns:** array `(len(phases), len(angles))`; 0 where even the unpushed walker does
+    not return (e.g. the passive walker on an unstable gait).
+    """
+    x_star = jnp.asarray(x_star, float)
+    P, A = jnp.meshgrid(jnp.asarray(phases, float), jnp.asarray(angles, float), indexing="ij")
+
+    def one(ph, ang):
+        t = ph * period
+        e = direction(ang)
+
+        def ok(p):
+            return _push_survives(model, feedback, x_star, t, p * e, num_steps, tol, config)
+
+        def body(_, lohi):
+            lo, hi = lohi
+            mid = 0.5 * (lo + hi)
+            good = ok(mid)
+            return jnp.where(good, mid, lo), jnp.where(good, hi, mid)
+
+        lo, _ = jax.lax.fori_loop(0, iterations, body, (jnp.zeros(()), jnp.asarray(p_max, float)))
+        return jnp.where(ok(jnp.zeros(())), lo, 0.0)
+
+    return jax.vmap(one)(P.reshape(-1), A.reshape(-1)).reshape(P.shape)
+
+
 # Jitted entry points (models and feedback laws carry array leaves: one compilation
 # serves every slope, weight and torque limit).
 _stabilize_jit = filter_jit(stabilize)
@@ -224,3 +291,4 @@ stabilize = _stabilize
 closed_loop_basin = filter_jit(closed_loop_basin)
 closed_loop_multipliers = filter_jit(closed_loop_multipliers)
 closed_loop_jacobian = filter_jit(closed_loop_jacobian)
+closed_loop_max_push = filter_jit(closed_loop_max_push)
