@@ -89,8 +89,8 @@ for name, (model, z) in cases.items():
 
 # %%
 shape = (41, 41) if FULL else (9, 9)
-kw = dict(half_widths=(0.05, 0.3), shape=shape, num_steps=25, torque_points=8,
-          config=vj.FAST_CONFIG)
+kw = {"half_widths": (0.05, 0.3), "shape": shape, "num_steps": 25, "torque_points": 8,
+          "config": vj.FAST_CONFIG}
 for name, (model, z) in cases.items():
     st = stab[name]
     bp = vj.closed_loop_basin(model, vj.ZeroFeedback(), z, **kw)
@@ -101,9 +101,9 @@ for name, (model, z) in cases.items():
     bc = vj.closed_loop_basin(model, st.feedback, z, **kw)
     print(f"{name}: passive fraction {float(bp.fraction):.3f}; with feedback by torque "
           f"limit (N m): {fractions}")
-    basin = dict(z_star=np.asarray(z), offsets_x=np.asarray(bc.offsets_x),
-                 offsets_y=np.asarray(bc.offsets_y), closed=np.asarray(bc.converged),
-                 passive=np.asarray(bp.converged))
+    basin = {"z_star": np.asarray(z), "offsets_x": np.asarray(bc.offsets_x),
+                 "offsets_y": np.asarray(bc.offsets_y), "closed": np.asarray(bc.converged),
+                 "passive": np.asarray(bp.converged)}
     fname = "notebook_out/06_" + name.replace(" ", "_") + ".png"
     vj.control.plot_stabilization(fname, f"Compass gait, {name} gait, hip-torque LQR",
                                   np.asarray(st.system.s), np.asarray(st.riccati.K),

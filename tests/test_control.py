@@ -152,7 +152,7 @@ def test_torque_is_zero_on_the_orbit(gaits, stabilized):
     u_nodes = np.asarray(jax.vmap(lambda x: fb(x, m))(nodes))
     assert np.max(np.abs(u_nodes)) < 1e-12  # rounding
     # Along the orbit of the passive hybrid simulator (its own integration, 1e-12).
-    ts, u = vj.step_torque(m, m.section_to_state(z), sysm.period, fb, 64, vj.TIGHT_CONFIG)
+    _, u = vj.step_torque(m, m.section_to_state(z), sysm.period, fb, 64, vj.TIGHT_CONFIG)
     assert np.max(np.abs(np.asarray(u))) < 1e-6
 
 
@@ -174,8 +174,8 @@ def test_saturated_feedback_converges_and_respects_the_limit(gaits, stabilized):
 def test_basin_grows_with_the_torque_limit(gaits, stabilized):
     m, z = gaits["unstable-3"]
     fb = stabilized["unstable-3"].feedback
-    kw = dict(half_widths=(0.05, 0.3), shape=(9, 9), num_steps=25, torque_points=8,
-              config=vj.FAST_CONFIG)
+    kw = {"half_widths": (0.05, 0.3), "shape": (9, 9), "num_steps": 25, "torque_points": 8,
+              "config": vj.FAST_CONFIG}
     fractions = []
     for lim in (0.0, 0.5, 2.0, 8.0):
         b = vj.closed_loop_basin(m, vj.with_torque_limit(fb, lim), z, **kw)
@@ -202,7 +202,7 @@ def test_pushes_survived_with_and_without_feedback(gaits, stabilized):
     m, z = gaits["unstable-3"]
     st = stabilized["unstable-3"]
     x0, T = m.section_to_state(z), float(st.system.period)
-    kw = dict(p_max=10.0, iterations=6, num_steps=25)
+    kw = {"p_max": 10.0, "iterations": 6, "num_steps": 25}
     closed = np.asarray(vj.closed_loop_max_push(m, st.feedback, x0, T, [0.2, 0.6],
                                                 [0.0, math.pi], **kw))
     passive = np.asarray(vj.closed_loop_max_push(m, vj.ZeroFeedback(), x0, T, [0.2, 0.6],

@@ -152,8 +152,8 @@ def run_stabilize(args):
     }
     basin_plot = None
     if args.basin:
-        kw = dict(half_widths=(0.05, 0.3), shape=(args.basin_grid, args.basin_grid),
-                  num_steps=25, tol=1e-4, torque_points=8, config=FAST_CONFIG)
+        kw = {"half_widths": (0.05, 0.3), "shape": (args.basin_grid, args.basin_grid),
+                  "num_steps": 25, "tol": 1e-4, "torque_points": 8, "config": FAST_CONFIG}
         bc = control.closed_loop_basin(model, st.feedback, z, **kw)
         bp = control.closed_loop_basin(model, control.ZeroFeedback(), z, **kw)
         conv = np.asarray(bc.converged)
@@ -184,7 +184,7 @@ def run_stabilize(args):
     if args.json:
         print_json(_finite_or_none(out))
     else:
-        fmt = lambda ev: ", ".join(f"{complex(v):.6g}" for v in np.asarray(ev))  # noqa: E731
+        fmt = lambda ev: ", ".join(f"{complex(v):.6g}" for v in np.asarray(ev))
         print(f"{args.family} gait at {args.slope_deg:g} deg: z = {np.round(zn, 8).tolist()}")
         print(f"open-loop multipliers:   {fmt(st.open_loop_multipliers)}")
         print(f"closed-loop multipliers: {fmt(st.closed_loop_multipliers)} (Poincare map)")

@@ -31,6 +31,7 @@ from ._feedback import (
     transverse_feedback as transverse_feedback,
     with_torque_limit as with_torque_limit,
 )
+from ._plot import plot_stabilization as plot_stabilization
 from ._riccati import (
     RiccatiSolution as RiccatiSolution,
     riccati_backward as riccati_backward,
@@ -41,4 +42,3 @@ from ._transverse import (
     jump_matrix as jump_matrix,
     transverse_system as transverse_system,
 )
-from ._plot import plot_stabilization as plot_stabilization

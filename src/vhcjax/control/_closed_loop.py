@@ -25,7 +25,6 @@ from ._feedback import TransverseFeedback, transverse_feedback
 from ._riccati import RiccatiSolution, riccati_backward, riccati_hamiltonian
 from ._transverse import TransverseSystem, phase_field, phase_matrices, transverse_system
 
-
 #: Hybrid-step settings of the closed-loop Poincare map: at the default 1e-10 the
 #: autodiff Jacobian of the step map carries the ODE error (~1e-6 in the multipliers).
 TIGHT_CONFIG = SolverConfig(rtol=1e-12, atol=1e-12, max_steps=8192)
@@ -234,7 +233,7 @@ def closed_loop_max_push(model, feedback, x_star, period, phases, angles, *, p_m
 
     - `x_star`, `period`: post-impact state and step time of the gait.
     - `phases`: fractions of `period` at which the push acts; `angles`: directions (rad,
-      0 forward, $\pi/2$ up), as `vhcjax.max_push`.
+      0 forward, $\\pi/2$ up), as `vhcjax.max_push`.
 
     **Returns:** array `(len(phases), len(angles))`; 0 where even the unpushed walker does
     not return (e.g. the passive walker on an unstable gait).
