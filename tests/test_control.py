@@ -11,6 +11,7 @@
 
 import math
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -191,8 +192,10 @@ def test_push_step_without_feedback_is_the_passive_impulse_step(gaits, stabilize
     x0 = m.section_to_state(z)
     t = 0.3 * float(stabilized["unstable-3"].system.period)
     imp = jnp.array([1.0, 0.5])
-    a = vj.closed_loop_push_step(m, vj.ZeroFeedback(), x0, t, imp)
-    b = vj.impulse_step(m, x0, t, imp)
+    # A zero torque limit makes the law passive while keeping its pytree (one compile).
+    off = vj.with_torque_limit(stabilized["unstable-3"].feedback, 0.0)
+    a = eqx.filter_jit(vj.closed_loop_push_step)(m, off, x0, t, imp)
+    b = eqx.filter_jit(vj.impulse_step)(m, x0, t, imp)
     assert a.result == b.result == vj.RESULTS.successful
     np.testing.assert_allclose(np.asarray(a.x_plus), np.asarray(b.x_plus), atol=1e-9)
 
@@ -203,14 +206,15 @@ def test_pushes_survived_with_and_without_feedback(gaits, stabilized):
     st = stabilized["unstable-3"]
     x0, T = m.section_to_state(z), float(st.system.period)
     kw = {"p_max": 10.0, "iterations": 6, "num_steps": 25}
-    closed = np.asarray(vj.closed_loop_max_push(m, st.feedback, x0, T, [0.2, 0.6],
-                                                [0.0, math.pi], **kw))
-    passive = np.asarray(vj.closed_loop_max_push(m, vj.ZeroFeedback(), x0, T, [0.2, 0.6],
-                                                 [0.0, math.pi], **kw))
+    grid = ([0.2, 0.6], [0.0, math.pi])
+    closed = np.asarray(vj.closed_loop_max_push(m, st.feedback, x0, T, *grid, **kw))
+    off = vj.with_torque_limit(st.feedback, 0.0)  # passive, same compiled program
+    passive = np.asarray(vj.closed_loop_max_push(m, off, x0, T, *grid, **kw))
     assert np.all(passive == 0.0)  # the passive walker never returns to an unstable gait
     assert np.all(closed > 1.0)
     # The bisection's answer against a direct run: just below survives.
     p = 0.9 * closed[0, 0]
-    sr = vj.closed_loop_push_step(m, st.feedback, x0, 0.2 * T, jnp.array([p, 0.0]))
+    sr = eqx.filter_jit(vj.closed_loop_push_step)(m, st.feedback, x0, 0.2 * T,
+                                                  jnp.array([p, 0.0]))
     sim = vj.simulate_closed_loop(m, sr.x_plus, st.feedback, 25)
     assert _errors(m, z, sim)[-1] < 1e-4
