@@ -91,7 +91,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
     n1, n2 = (100, 400) if args.quick else (1000, 10000)
     n_scipy = 10 if args.quick else 50
-    vhcjax = [sys.executable, "-m", "vhcjax.cli._main"]
+    vhcjax = [sys.executable, "-m", "vhcjax"]
     work = tempfile.mkdtemp(prefix="vhcjax-bench-cli-")
     env = dict(os.environ, VHCJAX_CACHE_DIR=os.path.join(work, "cache"))
     rows = {}

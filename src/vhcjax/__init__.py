@@ -16,12 +16,12 @@ from ._cache import (
     default_cache_dir as default_cache_dir,
     enable_compilation_cache as enable_compilation_cache,
 )
+from .hybrid import jacobian as poincare_jacobian  # noqa: F401 (re-export)
+from .hybrid import multipliers as poincare_multipliers  # noqa: F401 (re-export)
 from .hybrid import (
     fixed_point as fixed_point,
     FixedPoint as FixedPoint,
-    jacobian as poincare_jacobian,
     MapResult as MapResult,
-    multipliers as poincare_multipliers,
     step_map as step_map,
     DEFAULT_CONFIG as DEFAULT_CONFIG,
     FAST_CONFIG as FAST_CONFIG,
@@ -120,6 +120,37 @@ from .gait import (  # noqa: E402
     shooting_search as shooting_search,
     sweep as sweep,
     vhc_search as vhc_search,
+)
+
+# ---- control: orbital stabilization by transverse-linearization feedback ----
+from .control import (  # noqa: E402
+    TIGHT_CONFIG as TIGHT_CONFIG,
+    ClosedLoopBasin as ClosedLoopBasin,
+    ClosedLoopSimulation as ClosedLoopSimulation,
+    RiccatiSolution as RiccatiSolution,
+    Stabilization as Stabilization,
+    TransverseFeedback as TransverseFeedback,
+    TransverseSystem as TransverseSystem,
+    ZeroFeedback as ZeroFeedback,
+    actuated_vector_field as actuated_vector_field,
+    closed_loop_basin as closed_loop_basin,
+    closed_loop_jacobian as closed_loop_jacobian,
+    closed_loop_max_push as closed_loop_max_push,
+    closed_loop_multipliers as closed_loop_multipliers,
+    closed_loop_multipliers_transverse as closed_loop_multipliers_transverse,
+    closed_loop_push_step as closed_loop_push_step,
+    closed_loop_step as closed_loop_step,
+    closed_loop_step_map as closed_loop_step_map,
+    input_matrix as input_matrix,
+    jump_matrix as jump_matrix,
+    riccati_backward as riccati_backward,
+    riccati_hamiltonian as riccati_hamiltonian,
+    simulate_closed_loop as simulate_closed_loop,
+    stabilize as stabilize,
+    step_torque as step_torque,
+    transverse_feedback as transverse_feedback,
+    transverse_system as transverse_system,
+    with_torque_limit as with_torque_limit,
 )
 
 from ._cache import enable_default_cache as _enable_default_cache  # noqa: E402

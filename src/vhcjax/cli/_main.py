@@ -17,6 +17,7 @@ SUBCOMMANDS = [
     "_gait",  # gait, sweep
     "_bifurcation",  # bifurcation, multipliers
     "_robustness",  # contraction, basin, slope-sensitivity, push
+    "_stabilize",  # stabilize (transverse-linearization feedback)
     "_reproduce",  # reproduce (thesis chapter 7 report)
 ]
 

@@ -146,6 +146,12 @@ class CompassGait(WalkerModel):
         slope is $2l\\sin(\\tfrac{q_1+q_2+2\\psi}{2})\\sin(\\tfrac{q_2-q_1}{2})/\\cos\\psi$.)"""
         return q[0] + q[1] + 2 * self.psi
 
+    def input_matrix(self, q):
+        """$B(q)$ of $M\\ddot q + C\\dot q + G = B u$: one hip torque $u$ (N m) acting on the
+        relative angle $q_2 - q_1$, equal and opposite on the two legs (Freidovich,
+        Shiriaev and Manchester 2008). Shape (2, 1)."""
+        return jnp.array([[-1.0], [1.0]], dtype=jnp.asarray(q).dtype)
+
     def relabel(self, q, dq):
         """Swap stance and swing legs (thesis 3.32)."""
         return q[::-1], dq[::-1]

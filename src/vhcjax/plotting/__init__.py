@@ -29,3 +29,5 @@ from ._stability import (
     plot_multipliers_complex as plot_multipliers_complex,
     plot_multipliers_vs_slope as plot_multipliers_vs_slope,
 )
+
+from ._control import plot_stabilization as plot_stabilization

@@ -27,6 +27,8 @@ from ._contraction import (
 )
 
 from ._push import (
+    finish_step as finish_step,
+    swing_from as swing_from,
     direction as direction,
     hip_jacobian as hip_jacobian,
     impulse_step as impulse_step,

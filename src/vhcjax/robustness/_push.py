@@ -50,7 +50,7 @@ def direction(angle):
     return jnp.stack([jnp.cos(angle), jnp.sin(angle)])
 
 
-def _swing_from(model, x, t0, t_max, config, vector_field=None):
+def swing_from(model, x, t0, t_max, config, vector_field=None):
     """Rest of a swing from state `x` at time `t0` to heel strike (strike gate respected:
     if it is already open at `x`, look for the strike at once)."""
     n = model.n_dof
@@ -68,7 +68,7 @@ def _swing_from(model, x, t0, t_max, config, vector_field=None):
     return x_minus, t_end, code
 
 
-def _finish(model, x_minus, period, code, x_fallback):
+def finish_step(model, x_minus, period, code, x_fallback):
     x_plus, impulse, physical = model.impact(x_minus)
     finite = jnp.all(jnp.isfinite(x_plus)) & jnp.all(jnp.isfinite(impulse))
     code = RESULTS.where((code == RESULTS.successful) & ~physical, RESULTS.bad_impact, code)
@@ -89,10 +89,10 @@ def _pushed_step(model, x0, t_push, kick, config, alive):
     xs = sol0.ys[-1]
     x_k, t_k = kick(xs, t_s)
     bad = (model.fallen(xs[:n]) | model.fallen(x_k[:n]) | ~jnp.all(jnp.isfinite(x_k)))
-    x_minus, t_end, code = _swing_from(model, x_k, jnp.where(alive, t_k, 1e-12),
+    x_minus, t_end, code = swing_from(model, x_k, jnp.where(alive, t_k, 1e-12),
                                        jnp.where(alive, t_max, 2e-12), config)
     code = RESULTS.where(bad, RESULTS.fell, code)
-    return _finish(model, x_minus, t_end, code, x0)
+    return finish_step(model, x_minus, t_end, code, x0)
 
 
 def impulse_step(model, x0, t_push, impulse, config=DEFAULT_CONFIG, alive=True):

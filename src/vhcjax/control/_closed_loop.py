@@ -1,0 +1,292 @@
+"""Closed-loop analysis of a gait stabilized by transverse-linearization feedback.
+
+- `stabilize`: transverse linearization, the Riccati solution both ways, the feedback
+  law, and the closed-loop multipliers both ways, in one call.
+- `closed_loop_multipliers_transverse`: eigenvalues of $J\\Phi_{cl}(1)$, the monodromy of
+  $\\dot\\zeta = (A - BK)\\zeta$ with the jump (the interpolated gains of the law itself).
+- `closed_loop_jacobian` / `closed_loop_multipliers`: the Poincare map of the walker
+  under the feedback law on the post-impact section, differentiated by forward-mode
+  autodiff through the heel-strike event (independent of the linearization).
+- `closed_loop_basin`: a 2-D slice of the basin of attraction on the post-impact
+  section, with the torque used per converging point.
+"""
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from ..hybrid import DEFAULT_CONFIG, SolverConfig, flow
+from ..robustness import direction, finish_step, impulse_velocity_jump, swing_from
+from .._results import RESULTS
+from ._actuated import closed_loop_field, closed_loop_step, num_inputs, simulate_closed_loop
+from ._feedback import TransverseFeedback, transverse_feedback
+from ._riccati import RiccatiSolution, riccati_backward, riccati_hamiltonian
+from ._transverse import TransverseSystem, phase_field, phase_matrices, transverse_system
+
+#: Hybrid-step settings of the closed-loop Poincare map: at the default 1e-10 the
+#: autodiff Jacobian of the step map carries the ODE error (~1e-6 in the multipliers).
+TIGHT_CONFIG = SolverConfig(rtol=1e-12, atol=1e-12, max_steps=8192)
+
+
+def _sort(ev):
+    return ev[jnp.argsort(-jnp.abs(ev))]
+
+
+def closed_loop_multipliers_transverse(model, system, feedback, *, rtol=1e-12, atol=1e-12,
+                                       max_steps=8192):
+    """Closed-loop multipliers from the transverse linearization: eigenvalues of
+    $J\\,\\Phi_{cl}(1)$, $d\\Phi_{cl}/ds = (dt/ds)(A - BK(s))\\Phi_{cl}$, with $K(s)$ the
+    gain interpolant of `feedback` (saturation inactive at the orbit). Sorted by modulus.
+    """
+    r = system.w.shape[1]
+    tp, delta = system.theta_plus, system.theta_minus - system.theta_plus
+    u0 = jnp.zeros(num_inputs(model))
+
+    def field(s, y, args):
+        w = y[:r]
+        Phi = y[r:].reshape(r, r)
+        A, B, c = phase_matrices(model, tp, delta, s, w)
+        dw = phase_field(model, tp, delta, s, w, u0)[0]
+        return jnp.concatenate([dw, (c * (A - B @ feedback.gain(s)) @ Phi).reshape(-1)])
+
+    y0 = jnp.concatenate([system.w[0], jnp.eye(r).reshape(-1)])
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(field), diffrax.Tsit5(), t0=0.0, t1=1.0, dt0=None, y0=y0,
+        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        max_steps=max_steps, throw=False)
+    return _sort(jnp.linalg.eigvals(system.J @ sol.ys[-1, r:].reshape(r, r)))
+
+
+def closed_loop_step_map(model, feedback, z, config=DEFAULT_CONFIG):
+    """One step of the walker under `feedback` in post-impact section coordinates:
+    `(z_next, result)`."""
+    sr = closed_loop_step(model, model.section_to_state(z), feedback, config)
+    return model.state_to_section(sr.x_plus), sr.result
+
+
+def closed_loop_jacobian(model, feedback, z, config=TIGHT_CONFIG):
+    """Jacobian of `closed_loop_step_map` by forward-mode autodiff through the event."""
+    return jax.jacfwd(lambda zz: closed_loop_step_map(model, feedback, zz, config)[0])(z)
+
+
+def closed_loop_multipliers(model, feedback, z, config=TIGHT_CONFIG):
+    """Closed-loop multipliers as the eigenvalues of `closed_loop_jacobian`, by modulus."""
+    return _sort(jnp.linalg.eigvals(closed_loop_jacobian(model, feedback, z, config)))
+
+
+class Stabilization(eqx.Module):
+    """A gait stabilized by transverse-linearization LQR feedback.
+
+    - `system`: the `TransverseSystem` (open-loop `multipliers` included).
+    - `riccati`: the `RiccatiSolution` by backward iteration (used for the gains).
+    - `riccati_check`: the `RiccatiSolution` by the Hamiltonian monodromy.
+    - `riccati_agreement`: $\\max|X_1 - X_2| / \\max|X_1|$ over the phase grid.
+    - `feedback`: the `TransverseFeedback` law.
+    - `open_loop_multipliers`: eigenvalues of $J\\Phi$ (passive gait).
+    - `closed_loop_jacobian`: the autodiff Jacobian of the closed-loop step map at `z`
+      (post-impact section coordinates).
+    - `closed_loop_multipliers`: its eigenvalues.
+    - `closed_loop_multipliers_transverse`: eigenvalues of $J\\Phi_{cl}$.
+    - `max_gain`: $\\max_s \\|K(s)\\|_\\infty$ (largest entry).
+    - `result`: the first failure among the steps above, or `successful`.
+    """
+
+    system: TransverseSystem
+    riccati: RiccatiSolution
+    riccati_check: RiccatiSolution
+    riccati_agreement: jax.Array
+    feedback: TransverseFeedback
+    open_loop_multipliers: jax.Array
+    closed_loop_jacobian: jax.Array
+    closed_loop_multipliers: jax.Array
+    closed_loop_multipliers_transverse: jax.Array
+    max_gain: jax.Array
+    result: RESULTS
+
+
+def stabilize(model, z, Q=None, R=None, Q_jump=None, *, torque_limit=jnp.inf,
+              num_points=401, config=TIGHT_CONFIG):
+    """Stabilize the period-1 gait with post-impact section coordinates `z` by
+    transverse-linearization feedback (Shiriaev et al. 2008; Freidovich, Shiriaev and
+    Manchester 2008; Manchester 2011).
+
+    **Arguments:**
+
+    - `model`: a single-domain `WalkerModel` with an `input_matrix`.
+    - `z`: section coordinates of the gait (`model.state_to_section` of its post-impact
+      state), a fixed point of the passive step map.
+    - `Q`, `R`, `Q_jump`: LQR weights on $\\zeta$ (per second), on $u$ (per second) and on
+      $\\zeta^-$ at each impact; matrices or diagonals; default $I$, $I$, $Q$.
+    - `torque_limit`: saturation of each input (N m), default none.
+    - `num_points`: phase-grid points of the tabulated orbit and gains.
+    - `config`: `SolverConfig` of the hybrid steps (default `TIGHT_CONFIG`, 1e-12).
+
+    **Returns:** a `Stabilization`. Jittable (`eqx.filter_jit`); `throw` is not offered:
+    inspect `result`.
+    """
+    z = jnp.asarray(z, float)
+    system = transverse_system(model, model.section_to_state(z), num_points=num_points)
+    ric = riccati_backward(model, system, Q, R, Q_jump)
+    ric2 = riccati_hamiltonian(model, system, Q, R, Q_jump)
+    agree = jnp.max(jnp.abs(ric.X - ric2.X)) / jnp.max(jnp.abs(ric.X))
+    fb = transverse_feedback(system, ric, torque_limit)
+    cl_t = closed_loop_multipliers_transverse(model, system, fb)
+    jac = closed_loop_jacobian(model, fb, z, config)
+    cl_p = _sort(jnp.linalg.eigvals(jac))
+    code = system.result
+    for c in (ric.result, ric2.result):
+        code = RESULTS.where(code == RESULTS.successful, c, code)
+    return Stabilization(system, ric, ric2, agree, fb, system.multipliers, jac, cl_p, cl_t,
+                         jnp.max(jnp.abs(ric.K)), code)
+
+
+class ClosedLoopBasin(eqx.Module):
+    """A 2-D slice of the basin of attraction on the post-impact section.
+
+    - `offsets_x`, `offsets_y`: grid offsets along section coordinates `axes`.
+    - `converged`: boolean grid `(nx, ny)`: within `tol` of the gait after the steps.
+    - `fell`: boolean grid: the walker failed (fall, missed strike, ...).
+    - `fraction`: converging fraction of the grid.
+    - `max_abs_torque`, `rms_torque`: per point, the largest $|u|$ over all steps and the
+      RMS of $u$ over the first step (N m).
+    - `axes`: the two section coordinates varied.
+    """
+
+    offsets_x: jax.Array
+    offsets_y: jax.Array
+    converged: jax.Array
+    fell: jax.Array
+    fraction: jax.Array
+    max_abs_torque: jax.Array
+    rms_torque: jax.Array
+    axes: tuple = eqx.field(static=True)
+
+
+def closed_loop_basin(model, feedback, z_star, *, axes=(0, 1), half_widths=(0.05, 0.3),
+                      shape=(21, 21), num_steps=30, tol=1e-4, torque_points=16,
+                      config=DEFAULT_CONFIG):
+    """Basin slice of the gait `z_star` under `feedback` (use `ZeroFeedback` for the
+    passive walker: the same code path). Jittable; all points in one `vmap`.
+
+    **Returns:** a `ClosedLoopBasin`.
+    """
+    z_star = jnp.asarray(z_star, float)
+    ox = jnp.linspace(-half_widths[0], half_widths[0], shape[0])
+    oy = jnp.linspace(-half_widths[1], half_widths[1], shape[1])
+    X, Y = jnp.meshgrid(ox, oy, indexing="ij")
+    Z = jnp.broadcast_to(z_star, X.shape + z_star.shape)
+    Z = Z.at[..., axes[0]].add(X).at[..., axes[1]].add(Y).reshape(-1, z_star.shape[0])
+
+    def one(z):
+        sim = simulate_closed_loop(model, model.section_to_state(z), feedback, num_steps,
+                                   config=config, torque_points=torque_points)
+        zf = model.state_to_section(sim.steps.x_plus[-1])
+        ok = sim.result == RESULTS.successful
+        conv = ok & (jnp.max(jnp.abs(zf - z_star)) < tol)
+        return conv, ~ok, jnp.max(sim.max_abs_torque), sim.rms_torque[0]
+
+    conv, fell, umax, urms = jax.vmap(one)(Z)
+    conv = conv.reshape(shape)
+    return ClosedLoopBasin(ox, oy, conv, fell.reshape(shape), jnp.mean(conv),
+                           umax.reshape(shape), urms.reshape(shape), tuple(axes))
+
+
+
+def closed_loop_push_step(model, feedback, x0, t_push, impulse, config=DEFAULT_CONFIG,
+                          alive=True):
+    """One step of the walker under `feedback` from the post-impact state `x0`, with a hip
+    impulse `impulse` (N s, world frame) at time `t_push` into the step (as
+    `vhcjax.impulse_step`, which is the passive case). **Returns:** a `StepResult`."""
+    n = model.n_dof
+    field = closed_loop_field(model, feedback)
+    t_max = config.t_max_factor * model.time_scale
+    t_s = jnp.maximum(t_push, 1e-12)
+    alive = jnp.asarray(alive)
+    sol0 = flow(model, x0, jnp.where(alive, t_s, 1e-12), config, event=False,
+                vector_field=field)
+    xs = sol0.ys[-1]
+    x_k = xs.at[n:].add(impulse_velocity_jump(model, xs[:n], impulse))
+    bad = model.fallen(xs[:n]) | model.fallen(x_k[:n]) | ~jnp.all(jnp.isfinite(x_k))
+    x_minus, t_end, code = swing_from(model, x_k, jnp.where(alive, t_s, 1e-12),
+                                       jnp.where(alive, t_max, 2e-12), config,
+                                       vector_field=field)
+    code = RESULTS.where(bad, RESULTS.fell, code)
+    return finish_step(model, x_minus, t_end, code, x0)
+
+
+def _push_survives(model, feedback, x_star, t_push, impulse, num_steps, tol, config):
+    sr = closed_loop_push_step(model, feedback, x_star, t_push, impulse, config)
+    sim = simulate_closed_loop(model, sr.x_plus, feedback, num_steps, config=config,
+                               torque_points=0)
+    err = jnp.max(jnp.abs(model.state_to_section(sim.steps.x_plus[-1])
+                          - model.state_to_section(x_star)))
+    return (sr.result == RESULTS.successful) & (sim.result == RESULTS.successful) & (err < tol)
+
+
+def closed_loop_max_push(model, feedback, x_star, period, phases, angles, *, p_max=20.0,
+                         iterations=10, num_steps=30, tol=1e-4, config=DEFAULT_CONFIG):
+    """Largest hip impulse (N s) after which the walker under `feedback` returns within
+    `tol` of the gait in `num_steps` steps, per phase and direction (bisection on
+    $[0, p_{max}]$ assuming survival is monotone in the magnitude; `vmap` over the grid).
+
+    - `x_star`, `period`: post-impact state and step time of the gait.
+    - `phases`: fractions of `period` at which the push acts; `angles`: directions (rad,
+      0 forward, $\\pi/2$ up), as `vhcjax.max_push`.
+
+    **Returns:** array `(len(phases), len(angles))`; 0 where even the unpushed walker does
+    not return (e.g. the passive walker on an unstable gait).
+    """
+    x_star = jnp.asarray(x_star, float)
+    P, A = jnp.meshgrid(jnp.asarray(phases, float), jnp.asarray(angles, float), indexing="ij")
+
+    def one(ph, ang):
+        t = ph * period
+        e = direction(ang)
+
+        def ok(p):
+            return _push_survives(model, feedback, x_star, t, p * e, num_steps, tol, config)
+
+        def body(_, lohi):
+            lo, hi = lohi
+            mid = 0.5 * (lo + hi)
+            good = ok(mid)
+            return jnp.where(good, mid, lo), jnp.where(good, hi, mid)
+
+        lo, _ = jax.lax.fori_loop(0, iterations, body, (jnp.zeros(()), jnp.asarray(p_max, float)))
+        return jnp.where(ok(jnp.zeros(())), lo, 0.0)
+
+    return jax.vmap(one)(P.reshape(-1), A.reshape(-1)).reshape(P.shape)
+
+
+# Jitted entry points (models and feedback laws carry array leaves: one compilation
+# serves every slope, weight and torque limit).
+_stabilize_jit = eqx.filter_jit(stabilize)
+
+
+def _as_weights(model, Q, R, Q_jump):
+    r, m = 2 * model.n_dof - 1, num_inputs(model)
+
+    def mat(W, k):
+        W = jnp.eye(k) if W is None else jnp.asarray(W, float)
+        return jnp.diag(W) if W.ndim == 1 else W.reshape(k, k)
+
+    Q = mat(Q, r)
+    return Q, mat(R, m), Q if Q_jump is None else mat(Q_jump, r)
+
+
+def _stabilize(model, z, Q=None, R=None, Q_jump=None, *, torque_limit=jnp.inf,
+               num_points=401, config=TIGHT_CONFIG):
+    # Weights, torque limit and gait as arrays: one compiled program serves them all.
+    Q, R, Q_jump = _as_weights(model, Q, R, Q_jump)
+    return _stabilize_jit(model, jnp.asarray(z, float), Q, R, Q_jump,
+                          torque_limit=jnp.asarray(torque_limit, float),
+                          num_points=num_points, config=config)
+
+
+_stabilize.__doc__ = stabilize.__doc__
+stabilize = _stabilize
+closed_loop_basin = eqx.filter_jit(closed_loop_basin)
+closed_loop_multipliers = eqx.filter_jit(closed_loop_multipliers)
+closed_loop_jacobian = eqx.filter_jit(closed_loop_jacobian)
+closed_loop_max_push = eqx.filter_jit(closed_loop_max_push)

@@ -1,0 +1,78 @@
+"""Figure of a stabilized gait (matplotlib, imported when the figure is drawn)."""
+
+import numpy as np
+
+from ._common import pyplot
+
+_ZETA = (r"$\delta q_2$", r"$\delta\dot q_1$", r"$\delta\dot q_2$")
+_UNITS = ("N m/rad", "N m s/rad", "N m s/rad")
+
+
+def plot_stabilization(path, title, s, K, closed_errors, passive_errors, basin=None):
+    """Three panels: gains $K(s)$ against phase, recovery (error per step, closed loop and
+    passive), basin slices with and without feedback (or a note when not computed).
+
+    **Arguments:**
+
+    - `path`: PNG file.
+    - `title`: names the case (model, slope, gait).
+    - `s`, `K`: phase grid and gains `(N+1, m, r)` (compass gait: r = 3).
+    - `closed_errors`, `passive_errors`: max-norm distance to the gait on the post-impact
+      section after each step.
+    - `basin`: `None` or a dict with `z_star`, `offsets_x`, `offsets_y` and boolean grids
+      `passive`, `closed` (converged), over section coordinates $(q_1, \\dot q_1)$.
+    """
+    plt = pyplot()
+
+    K = np.asarray(K)
+    fig, axes = plt.subplots(1, 3, figsize=(15, 5.2), dpi=110)
+    ax = axes[0]
+    for j in range(K.shape[2]):
+        lab = _ZETA[j] if K.shape[2] == 3 else f"zeta_{j}"
+        unit = _UNITS[j] if K.shape[2] == 3 else ""
+        ax.plot(s, K[:, 0, j], label=f"gain on {lab} ({unit})")
+    ax.set_xlabel(r"phase $s = (q_1 - q_1^+)/(q_1^- - q_1^+)$ (1)")
+    ax.set_ylabel("hip torque gain $K(s)$ (units in legend)")
+    ax.set_title("LQR gains along the step")
+    ax.axhline(0, color="k", lw=0.5)
+    ax.legend(fontsize=8)
+
+    ax = axes[1]
+    k = np.arange(1, len(closed_errors) + 1)
+    ax.semilogy(k, np.maximum(closed_errors, 1e-16), "o-", ms=3, label="with feedback")
+    ax.semilogy(k, np.maximum(passive_errors, 1e-16), "s-", ms=3, label="passive")
+    ax.set_xlabel("step (1)")
+    ax.set_ylabel(r"$\|z_k - z_\star\|_\infty$ after impact (rad, rad/s)")
+    ax.set_title("Recovery from the perturbed gait")
+    ax.legend(fontsize=8)
+
+    ax = axes[2]
+    if basin is None:
+        ax.text(0.5, 0.5, "basin not computed\n(run with --basin)", ha="center",
+                va="center", transform=ax.transAxes)
+        ax.set_axis_off()
+    else:
+        z = basin["z_star"]
+        X = z[0] + np.asarray(basin["offsets_x"])
+        Y = z[1] + np.asarray(basin["offsets_y"])
+        extent = (X[0], X[-1], Y[0], Y[-1])
+        code = np.asarray(basin["closed"], int) + 2 * np.asarray(basin["passive"], int)
+        from matplotlib.colors import ListedColormap
+
+        cmap = ListedColormap(["#eeeeee", "#2ca02c", "#1f77b4", "#9467bd"])
+        ax.imshow(code.T, origin="lower", extent=extent, aspect="auto", cmap=cmap,
+                  vmin=-0.5, vmax=3.5, interpolation="nearest")
+        ax.plot(z[0], z[1], "r*", ms=12, mec="k", label="gait")
+        for c, name in ((1, "converges with feedback only"), (2, "converges passive only"),
+                        (3, "converges both")):
+            ax.plot([], [], "s", color=cmap(c), label=name)
+        ax.plot([], [], "s", color=cmap(0), label="does not converge")
+        ax.set_xlabel(r"$q_1$ just after impact (rad)")
+        ax.set_ylabel(r"$\dot q_1$ just after impact (rad/s)")
+        ax.set_title(f"Basin slice: passive {np.mean(basin['passive']):.2f}, "
+                     f"with feedback {np.mean(basin['closed']):.2f}")
+        ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
