@@ -141,37 +141,55 @@ def walker_frames(sim, model):
     return out
 
 
-def _draw_walker(ax, frames, i, psi, l, texts):
-    """Draw frame `i` in a window of width 4 l that follows the hip."""
-    ax.clear()
-    hip_x = frames["hip"][i][0]
-    xlim = (hip_x - 2.0 * l, hip_x + 2.0 * l)
-    y0 = -np.tan(psi) * hip_x
-    ylim = (y0 - 0.6 * l, y0 + 1.4 * l)
-    xs = np.array(xlim)
-    ax.plot(xs, -np.tan(psi) * xs, color="0.3", lw=1.5)  # the slope
-    ax.fill_between(xs, -np.tan(psi) * xs, ylim[0], color="0.85")
-    # Footprints: the stance-foot positions so far.
-    prints = np.unique(frames["stance_foot"][: i + 1], axis=0)
-    ax.plot(prints[:, 0], prints[:, 1], "v", color="0.4", ms=5)
-    st, hip, sw = frames["stance_foot"][i], frames["hip"][i], frames["swing_foot"][i]
-    ax.plot([st[0], hip[0]], [st[1], hip[1]], color="C3", lw=3, solid_capstyle="round",
-            label="stance leg")
-    ax.plot([hip[0], sw[0]], [hip[1], sw[1]], color="C2", lw=3, solid_capstyle="round",
-            label="swing leg")
-    for name in ("stance_mass", "swing_mass"):
-        p = frames[name][i]
-        ax.plot(p[0], p[1], "o", color="k", ms=5)
-    ax.plot(hip[0], hip[1], "o", color="k", ms=12)
-    q = frames["q"][i]
-    ax.text(0.02, 0.95, texts.format(t=frames["t"][i], q1=q[0], q2=q[1]),
-            transform=ax.transAxes, va="top", family="monospace", fontsize=9)
-    ax.legend(loc="upper right", fontsize=8)
-    ax.set_xlim(*xlim)
-    ax.set_ylim(*ylim)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (m), downhill")
-    ax.set_ylabel("y (m)")
+class _WalkerArtists:
+    """The artists of the walker figure, drawn once; `update(i)` moves them to frame `i`
+    in a window of width 4 l that follows the hip (an animation frame costs a few
+    `set_data` calls, not a redrawn figure)."""
+
+    def __init__(self, ax, frames, psi, l, texts, name="walker"):
+        self.ax, self.frames, self.psi, self.l, self.texts = ax, frames, psi, l, texts
+        ax.set_title(f"{name} on a {np.degrees(psi):.2f} deg slope", fontsize=10)
+        hips = frames["hip"][:, 0]
+        xs = np.array([hips.min() - 3.0 * l, hips.max() + 3.0 * l])
+        ax.plot(xs, -np.tan(psi) * xs, color="0.3", lw=1.5)  # the slope
+        ax.fill_between(xs, -np.tan(psi) * xs, -np.tan(psi) * xs - 10.0 * l, color="0.85")
+        (self.prints,) = ax.plot([], [], "v", color="0.4", ms=5)
+        (self.stance,) = ax.plot([], [], color="C3", lw=3, solid_capstyle="round",
+                                 label="stance leg")
+        (self.swing,) = ax.plot([], [], color="C2", lw=3, solid_capstyle="round",
+                                label="swing leg")
+        (self.masses,) = ax.plot([], [], "o", color="k", ms=5)
+        (self.hip,) = ax.plot([], [], "o", color="k", ms=12)
+        self.text = ax.text(0.02, 0.95, "", transform=ax.transAxes, va="top",
+                            family="monospace", fontsize=9)
+        ax.legend(loc="upper right", fontsize=8)
+        ax.set_aspect("equal")
+        # The window follows the hip: fixed tick positions would slide with it, so the
+        # scale is given by the leg (1 leg length = l m) instead of ticks.
+        ax.set_xticks([])
+        ax.set_yticks([])
+        ax.set_xlabel(f"downhill; window 4 l wide (leg length l = {l:g} m)")
+        # Footprints so far: the distinct stance-foot positions, in order.
+        feet = frames["stance_foot"]
+        self.first_index = np.concatenate([[0], np.nonzero(np.any(np.diff(feet, axis=0) != 0,
+                                                                  axis=1))[0] + 1])
+
+    def update(self, i):
+        f, l, psi = self.frames, self.l, self.psi
+        st, hip, sw = f["stance_foot"][i], f["hip"][i], f["swing_foot"][i]
+        shown = f["stance_foot"][self.first_index[self.first_index <= i]]
+        self.prints.set_data(shown[:, 0], shown[:, 1])
+        self.stance.set_data([st[0], hip[0]], [st[1], hip[1]])
+        self.swing.set_data([hip[0], sw[0]], [hip[1], sw[1]])
+        m = np.stack([f["stance_mass"][i], f["swing_mass"][i]])
+        self.masses.set_data(m[:, 0], m[:, 1])
+        self.hip.set_data([hip[0]], [hip[1]])
+        q = f["q"][i]
+        self.text.set_text(self.texts.format(t=f["t"][i], q1=q[0], q2=q[1]))
+        hip_x = hip[0]
+        y0 = -np.tan(psi) * hip_x
+        self.ax.set_xlim(hip_x - 2.0 * l, hip_x + 2.0 * l)
+        self.ax.set_ylim(y0 - 0.6 * l, y0 + 1.4 * l)
 
 
 _TEXT = "t = {t:5.2f} s\nq1 = {q1:+.3f} rad\nq2 = {q2:+.3f} rad"
@@ -189,7 +207,8 @@ def plot_walker(sim, model, frame=0, ax=None, path=None):
         fig, ax = plt.subplots(figsize=(6, 3.2))
     else:
         fig = ax.figure
-    _draw_walker(ax, frames, frame, float(model.psi), float(model.l), _TEXT)
+    _WalkerArtists(ax, frames, float(model.psi), float(model.l), _TEXT,
+                             type(model).__name__).update(frame)
     return _done(fig, path)
 
 
@@ -206,7 +225,7 @@ def animate(sim, model, path, *, fps=None, max_frames=300):
     **Returns:** the number of frames written.
     """
     plt = pyplot()
-    from matplotlib.animation import FuncAnimation, PillowWriter
+    from PIL import Image
 
     frames = walker_frames(sim, model)
     nframes = len(frames["t"])
@@ -216,14 +235,21 @@ def animate(sim, model, path, *, fps=None, max_frames=300):
     if fps is None:
         duration = frames["t"][-1] - frames["t"][0]
         fps = max(1.0, min(50.0, len(idx) / max(duration, 1e-9)))
-    fig, ax = plt.subplots(figsize=(6, 3.2))
-    psi, l = float(model.psi), float(model.l)
+    fig, ax = plt.subplots(figsize=(6, 3.2), dpi=80)
+    artists = _WalkerArtists(ax, frames, float(model.psi), float(model.l), _TEXT,
+                             type(model).__name__)
 
     def update(j):
-        _draw_walker(ax, frames, idx[j], psi, l, _TEXT)
+        artists.update(idx[j])
         return ()
 
-    anim = FuncAnimation(fig, update, frames=len(idx), blit=False)
-    anim.save(path, writer=PillowWriter(fps=fps), dpi=80)
+    images = []
+    for j in range(len(idx)):  # one draw per frame, straight into Pillow
+        update(j)
+        fig.canvas.draw()
+        images.append(Image.fromarray(np.asarray(fig.canvas.buffer_rgba())).convert(
+            "P", palette=Image.Palette.ADAPTIVE, colors=64))
     plt.close(fig)
+    images[0].save(path, save_all=True, append_images=images[1:],
+                   duration=int(round(1000.0 / fps)), loop=0)
     return len(idx)
