@@ -4,12 +4,13 @@ Each subcommand lives in its own module of `vhcjax.cli` exposing `register(subpa
 bad input becomes a one-line message and exit status 2 instead of a traceback.
 """
 
-import argparse
 import importlib
 import os
+import signal
 import sys
+import threading
 
-from ._common import CLIError
+from ._common import ArgumentError, CLIError, Parser
 
 # Subcommand modules, in the order they appear in `vhcjax --help`.
 SUBCOMMANDS = [
@@ -22,7 +23,7 @@ SUBCOMMANDS = [
 
 
 def build_parser():
-    parser = argparse.ArgumentParser(
+    parser = Parser(
         prog="vhcjax",
         description="Periodic gaits of the passive compass-gait biped: simulate, find gaits, "
         "check stability, measure robustness. Angles on the command line are in degrees "
@@ -34,9 +35,42 @@ def build_parser():
     return parser
 
 
+def _stop_on_interrupt():
+    """Ctrl-C (SIGINT) on the command line: one line, exit status 130, at once.
+
+    A Python signal handler runs only between bytecodes of the main thread, which may sit
+    in a compiled XLA program for minutes, and a `KeyboardInterrupt` does not stop worker
+    threads. So SIGINT is blocked here, before any other thread exists (threads inherit
+    the mask), and one daemon thread waits for it, removes the partial output files
+    (`vhcjax._io`) and ends the process.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        return
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    command = next((a for a in sys.argv[1:] if not a.startswith("-")), None)
+    line = f"vhcjax {command}: interrupted\n" if command else "vhcjax: interrupted\n"
+
+    def wait():
+        signal.sigwait({signal.SIGINT})
+        from .._io import remove_pending
+
+        remove_pending()
+        os.write(2, line.encode())
+        os._exit(130)
+
+    threading.Thread(target=wait, name="vhcjax-sigint", daemon=True).start()
+
+
 def main(argv=None):
-    parser = build_parser()
-    args = parser.parse_args(argv)
+    """Run the command line `argv` (default `sys.argv[1:]`); returns the exit status:
+    0, 1 (the computation failed, e.g. no gait found), 2 (bad input), 130 (interrupted)."""
+    if argv is None:
+        _stop_on_interrupt()
+    try:
+        args = build_parser().parse_args(argv)
+    except ArgumentError as e:
+        print(e, file=sys.stderr)
+        return 2
     if os.environ.get("VHCJAX_CACHE_DIR"):  # keep compiled programs on disk (README)
         from .._compile import enable_compilation_cache
 
@@ -46,6 +80,12 @@ def main(argv=None):
     except CLIError as e:
         print(f"vhcjax {args.command}: error: {e}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        from .._io import remove_pending
+
+        remove_pending()
+        print(f"vhcjax {args.command}: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

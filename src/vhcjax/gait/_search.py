@@ -1253,7 +1253,7 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     sign = family_sign(family)
     if B <= chunk:
         gaits = _find_chunk(model, guesses, B, _padded_size(B, mesh), sign, method, solver, mesh, chord)
-        return _relabel(gaits, family)
+        return _clean_failed(_relabel(gaits, family), guesses, B)
 
     def part(x, i, j):
         if eqx.is_array(x) and jnp.ndim(x) > 0:
@@ -1268,7 +1268,25 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
         ),
         B, chunk, workers,
     )
-    return _relabel(gaits, family)
+    return _clean_failed(_relabel(gaits, family), guesses, B)
+
+
+def _clean_failed(gaits, guesses, B):
+    """Members with a non-finite guess are `bad_input` (issue 21); failed members hold no
+    NaN or inf: their numbers are placeholders (0 where not finite), the code says why."""
+    if guesses is not None:
+        finite = jnp.broadcast_to(jnp.all(jnp.isfinite(guesses), axis=1), (B,))
+        gaits = eqx.tree_at(lambda g: g.result, gaits,
+                            RESULTS.where(finite, gaits.result, RESULTS.bad_input))
+    failed = gaits.result != RESULTS.successful
+
+    def clean(x):
+        if not eqx.is_inexact_array(x) or jnp.ndim(x) == 0:
+            return x
+        f = failed.reshape(failed.shape + (1,) * (x.ndim - failed.ndim))
+        return jnp.where(f & ~jnp.isfinite(x), 0.0, x)
+
+    return jax.tree_util.tree_map(clean, gaits)
 
 
 def _find_chunk(model, guesses, B, P, sign, method, solver, mesh, chord):

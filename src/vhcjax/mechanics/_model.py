@@ -14,6 +14,7 @@ from typing import ClassVar
 
 import equinox as eqx
 import jax.numpy as jnp
+import numpy as np
 
 from . import _lagrangian as mech
 class WalkerModel(eqx.Module):
@@ -41,6 +42,45 @@ class WalkerModel(eqx.Module):
             value = getattr(self, field.name, None)
             if isinstance(value, float) or (isinstance(value, int) and not isinstance(value, bool)):
                 object.__setattr__(self, field.name, jnp.asarray(value, dtype=float))
+
+    #: Parameters that may be zero (the others must be positive); `psi` must be in
+    #: [0, pi/2).
+    NONNEGATIVE_FIELDS: ClassVar[tuple] = ("min_strike_angle",)
+
+    def validate(self):
+        """Boolean (traceable, per batch member under `vmap`): every float parameter
+        finite, the slope `psi` in $[0, \\pi/2)$, the others positive (masses, lengths,
+        gravity), except `NONNEGATIVE_FIELDS`. Simulations of an invalid model end with
+        `RESULTS.bad_input`. Subclasses may narrow the ranges."""
+        ok = jnp.asarray(True)
+        for field in dataclasses.fields(self):
+            v = getattr(self, field.name, None)
+            if not eqx.is_inexact_array(v):
+                continue
+            ok = ok & jnp.all(jnp.isfinite(v))
+            if field.name == "psi":
+                ok = ok & jnp.all((v >= 0) & (v < jnp.pi / 2))
+            elif field.name in self.NONNEGATIVE_FIELDS:
+                ok = ok & jnp.all(v >= 0)
+            else:
+                ok = ok & jnp.all(v > 0)
+        return ok
+
+    def __repr__(self):
+        """`CompassGait(m1=5, m2=5, ..., psi=0.0523599)`: the parameter values (a 0-d array
+        would print as `f64[]`)."""
+        parts = []
+        for field in dataclasses.fields(self):
+            v = getattr(self, field.name, None)
+            try:
+                a = np.asarray(v)
+                text = f"{a.item():.6g}" if a.ndim == 0 and a.dtype.kind in "fiu" else (
+                    np.array2string(a, precision=6, separator=", ") if a.dtype.kind in "fiu"
+                    else repr(v))
+            except Exception:  # a tracer (inside jit/vmap): its own repr
+                text = repr(v)
+            parts.append(f"{field.name}={text}")
+        return f"{type(self).__name__}({', '.join(parts)})"
 
     @abc.abstractmethod
     def kinetic_energy(self, q, dq, base_velocity=None): ...

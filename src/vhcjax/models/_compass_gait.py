@@ -189,7 +189,8 @@ class CompassGait(WalkerModel):
         )
         psi = jnp.asarray(self.psi, float)
         return (
-            jnp.all(jnp.isfinite(leaves))
+            super().validate()
+            & jnp.all(jnp.isfinite(leaves))
             & jnp.all(leaves > 0)
             & jnp.isfinite(psi)
             & (psi > 0)
