@@ -29,6 +29,10 @@ class Parser(argparse.ArgumentParser):
             r"^-(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|inf|infinity|nan)$", re.IGNORECASE)
 
     def error(self, message):
+        # "argument --x0: must be ..." -> "--x0 must be ...", as the model-flag checks say
+        m = re.fullmatch(r"argument ([^:]+): (must .*)", message)
+        if m:
+            message = f"{m[1]} {m[2]}"
         raise ArgumentError(f"{self.prog}: error: {message}")
 
 

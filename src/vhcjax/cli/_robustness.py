@@ -246,7 +246,8 @@ def run_slope(args):
         full = terrain_recovery(model, x_star, hs, args.steps, 0.0, stop_when_converged=False)
         plot_terrain(np.asarray(hs), full, period, args.png, float(g.norm))
         if not args.no_derivatives:
-            plot_slope(s, args.png.removesuffix(".png") + "-slope.png")
+            plot_slope(s, args.png.removesuffix(".png") + "-slope.png",
+                       case=f"gait at {args.slope_deg:g} deg")
     if args.json:
         print_json(out)
     else:

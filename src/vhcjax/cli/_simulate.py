@@ -100,9 +100,12 @@ def run(args):
     if args.plots:
         from .. import plotting as plotting
         if int(sim.num_successful) > 0:
-            plotting.plot_states(sim, path=os.path.join(args.plots, "states.png"))
-            plotting.plot_phase_portrait(sim, path=os.path.join(args.plots, "phase.png"))
-            plotting.plot_step_periods(sim, path=os.path.join(args.plots, "periods.png"))
+            case = f"slope {args.slope_deg:g} deg, from x0 = {list(args.x0)}"
+            plotting.plot_states(sim, path=os.path.join(args.plots, "states.png"), case=case)
+            plotting.plot_phase_portrait(sim, path=os.path.join(args.plots, "phase.png"),
+                                         case=case)
+            plotting.plot_step_periods(sim, path=os.path.join(args.plots, "periods.png"),
+                                       case=case)
     if args.animate:
         from .. import plotting as plotting
         if int(sim.num_successful) > 0:

@@ -132,22 +132,39 @@ def plot_push(phases, sens, angles, largest, path, unit="N s", p_max=None):
     plt.close(fig)
 
 
-def plot_slope(sens, path):
-    """Bar chart of the slope derivatives (per degree) of the gait quantities."""
+def plot_slope(sens, path=None, case=None):
+    """Slope derivatives (per degree of slope) of the gait quantities, one panel per unit
+    (rad, rad/s, s, m, m/s, and the dimensionless multiplier moduli), each with a legend.
+
+    **Arguments:** `sens` (a `SlopeSensitivity`), `path` (save there and close),
+    `case` (named in the title, e.g. `"stable gait, 3 deg"`). **Returns:** the figure.
+    """
     plt = _plt()
     deg = np.pi / 180
-    names = [r"$q_1^*$", r"$\dot q_1^*$", r"$\dot q_2^*$", "T", "L", "v", r"$|\lambda_1|$",
-             r"$|\lambda_3|$"]
-    vals = list(np.asarray(sens.dz) * deg) + [float(sens.dperiod) * deg,
-                                              float(sens.dstep_length) * deg,
-                                              float(sens.dspeed) * deg,
-                                              float(sens.dmodulus[0]) * deg,
-                                              float(sens.dmodulus[-1]) * deg]
-    fig, ax = plt.subplots(figsize=(6.4, 3.8), dpi=130)
-    ax.bar(names, vals, color=["C0"] * 3 + ["C1"] * 3 + ["C2"] * 2)
-    ax.axhline(0, color="k", lw=0.6)
-    ax.set_ylabel("derivative per degree of slope")
-    ax.set_title("Sensitivity of the gait to the slope (implicit differentiation)", fontsize=9)
+    dz = np.asarray(sens.dz) * deg
+    dmod = np.asarray(sens.dmodulus) * deg
+    panels = [
+        ("rad / deg", [(r"$q_1^*$", dz[0])]),
+        ("rad/s / deg", [(r"$\dot q_1^*$", dz[1]), (r"$\dot q_2^*$", dz[2])]),
+        ("s / deg", [("step period T", float(sens.dperiod) * deg)]),
+        ("m / deg", [("step length L", float(sens.dstep_length) * deg)]),
+        ("m/s / deg", [("speed v", float(sens.dspeed) * deg)]),
+        ("1 / deg", [(f"$|\\lambda_{i + 1}|$", v) for i, v in enumerate(dmod)]),
+    ]
+    fig, axes = plt.subplots(2, 3, figsize=(9.5, 5.4), dpi=120)
+    for ax, (unit, bars) in zip(axes.ravel(), panels):
+        for k, (name, v) in enumerate(bars):
+            ax.bar([k], [v], color=f"C{k}", label=f"{name}: {v:+.3g}")
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_xticks([])
+        ax.set_xlim(-0.8, max(len(bars), 2) - 0.2)
+        ax.set_ylabel(f"derivative ({unit})")
+        ax.legend(fontsize=7, loc="best")
+        ax.grid(alpha=0.3, axis="y")
+    fig.suptitle("Sensitivity of the gait to the slope, per degree (implicit "
+                 "differentiation)" + (f": {case}" if case else ""), fontsize=10)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    if path is not None:
+        fig.savefig(path)
+        plt.close(fig)
+    return fig
