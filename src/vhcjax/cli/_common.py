@@ -61,6 +61,7 @@ def number(kind=float, *, lo=None, hi=None, lo_open=False, hi_open=False):
         return v
 
     parse.__name__ = kind.__name__
+    parse.bounds = (kind, lo, hi, lo_open, hi_open)  # for the tests of every flag
     return parse
 
 

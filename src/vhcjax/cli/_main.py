@@ -10,6 +10,7 @@ import signal
 import sys
 import threading
 
+from .._io import remove_pending
 from ._common import ArgumentError, CLIError, Parser
 
 # Subcommand modules, in the order they appear in `vhcjax --help`.
@@ -38,25 +39,34 @@ def build_parser():
 def _stop_on_interrupt():
     """Ctrl-C (SIGINT) on the command line: one line, exit status 130, at once.
 
-    A Python signal handler runs only between bytecodes of the main thread, which may sit
-    in a compiled XLA program for minutes, and a `KeyboardInterrupt` does not stop worker
-    threads. So SIGINT is blocked here, before any other thread exists (threads inherit
-    the mask), and one daemon thread waits for it, removes the partial output files
+    A Python signal handler runs only when the main thread executes bytecode, and it may
+    sit in a compiled XLA program for minutes; a `KeyboardInterrupt` does not stop worker
+    threads either. But the C-level handler that `signal.signal` installs writes the
+    signal number to the wakeup file descriptor at once, from whichever thread the
+    signal hits; one daemon thread blocked on reading it removes the partial output files
     (`vhcjax._io`) and ends the process.
     """
     if threading.current_thread() is not threading.main_thread():
         return
-    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
     command = next((a for a in sys.argv[1:] if not a.startswith("-")), None)
-    line = f"vhcjax {command}: interrupted\n" if command else "vhcjax: interrupted\n"
+    line = (f"vhcjax {command}: interrupted\n" if command else "vhcjax: interrupted\n").encode()
+    lock = threading.Lock()
 
-    def wait():
-        signal.sigwait({signal.SIGINT})
-        from .._io import remove_pending
+    def stop(*_):
+        with lock:  # the handler and the thread may both get here
+            remove_pending()
+            os.write(2, line)
+            os._exit(130)
 
-        remove_pending()
-        os.write(2, line.encode())
-        os._exit(130)
+    r, w = os.pipe()
+    os.set_blocking(w, False)
+    signal.signal(signal.SIGINT, stop)
+    signal.set_wakeup_fd(w, warn_on_full_buffer=False)
+
+    def wait():  # no import here: the main thread may hold the import locks
+        while signal.SIGINT not in os.read(r, 64):
+            pass
+        stop()
 
     threading.Thread(target=wait, name="vhcjax-sigint", daemon=True).start()
 
@@ -81,8 +91,6 @@ def main(argv=None):
         print(f"vhcjax {args.command}: error: {e}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        from .._io import remove_pending
-
         remove_pending()
         print(f"vhcjax {args.command}: interrupted", file=sys.stderr)
         return 130

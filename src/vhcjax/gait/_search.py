@@ -1276,8 +1276,8 @@ def _clean_failed(gaits, guesses, B):
     NaN or inf: their numbers are placeholders (0 where not finite), the code says why."""
     if guesses is not None:
         finite = jnp.broadcast_to(jnp.all(jnp.isfinite(guesses), axis=1), (B,))
-        gaits = eqx.tree_at(lambda g: g.result, gaits,
-                            RESULTS.where(finite, gaits.result, RESULTS.bad_input))
+        code = jax.vmap(lambda f, r: RESULTS.where(f, r, RESULTS.bad_input))(finite, gaits.result)
+        gaits = eqx.tree_at(lambda g: g.result, gaits, code)
     failed = gaits.result != RESULTS.successful
 
     def clean(x):
