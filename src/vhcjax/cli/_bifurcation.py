@@ -4,7 +4,8 @@ multipliers in the complex plane."""
 import math
 
 from ._common import (
-    CLIError, add_model_flags, check_output_file, check_slope_deg, count, model_from_args,
+    CLIError, add_model_flags, check_output_file, check_slope_deg, count, describe,
+    model_from_args,
     parse_range, print_json, progress, warn,
 )
 
@@ -78,7 +79,7 @@ def run_multipliers(args):
         sets, labels = ([tr, pc], ["transverse linearization", "Poincare (autodiff)"]) \
             if trusted else ([pc], ["Poincare (autodiff)"])
         plot_multipliers_complex(sets, labels, args.png,
-                                 title=f"{args.family} gait, {args.slope_deg} deg")
+                                 title=f"{args.family} gait, {describe(args)}")
     out = {"slope_deg": args.slope_deg, "family": args.family, "z": np.asarray(fam.z[0]),
            **stab}
     if args.json:
@@ -151,13 +152,16 @@ def run_bifurcation(args):
         if branch2 is not None and len(branch2["psi"]):
             branches.append(("period 2", np.degrees(branch2["psi"]), branch2["periods"],
                              branch2["stable"]))
-        plot_bifurcation(diag, branches, args.png, flips_deg=[math.degrees(f) for f in flips])
+        plot_bifurcation(diag, branches, args.png, flips_deg=[math.degrees(f) for f in flips],
+                         case=describe(args, f"slopes {args.slope_deg} deg"))
     if args.png_multipliers:
         from ..plotting import plot_multipliers_vs_slope
 
         plot_multipliers_vs_slope(np.degrees(psis)[ok1],
                                   {"stable family": np.asarray(mult.poincare)[ok1]},
-                                  args.png_multipliers)
+                                  args.png_multipliers,
+                                  case="Poincare-map Jacobian, "
+                                  + describe(args, f"slopes {args.slope_deg} deg"))
     fell = np.asarray(diag.fell)
     out = {
         "period_doubling_slopes_deg": [math.degrees(f) for f in flips],

@@ -154,6 +154,20 @@ def model_from_args(args, slope_deg=None):
     )
 
 
+def describe(args, slope_deg=None):
+    """The case in words for figure titles: the slope and the parameters that differ
+    from thesis Table 1, e.g. `"slope 3 deg, mH 0.1 kg, m 10 kg"`."""
+    slope = args.slope_deg if slope_deg is None else slope_deg
+    parts = [slope if isinstance(slope, str) else f"slope {slope:g} deg"]
+    for flag, default, label in (("mass_hip", 10.0, "mH {} kg"), ("mass_leg", 5.0, "m {} kg"),
+                                 ("a", 0.5, "a {} m"), ("b", 0.5, "b {} m"),
+                                 ("gravity", 9.81, "g {} m/s^2")):
+        v = getattr(args, flag)
+        if v != default:
+            parts.append(label.format(f"{v:g}"))
+    return ", ".join(parts)
+
+
 def parse_range(text, name="--slope-deg"):
     """`START:STOP:STEP` (STOP included when on the grid, never passed) -> list of floats."""
     try:
@@ -167,7 +181,7 @@ def parse_range(text, name="--slope-deg"):
     if step <= 0 or stop < start:
         raise CLIError(f"{name} needs STEP > 0 and STOP >= START, got {text!r}")
     # STOP is included when it lies within 1e-9 of a step of the grid; nothing past it.
-    n = int(math.floor((stop - start) / step + 1e-9)) + 1
+    n = math.floor((stop - start) / step + 1e-9) + 1
     if n > 100_000:
         raise CLIError(f"{name} {text!r} gives {n} values; at most 100000")
     return [start + i * step for i in range(n)]

@@ -5,7 +5,7 @@ import csv
 import math
 
 from ._common import (
-    FINITE, add_model_flags, check_output_file, check_slope_deg, model_from_args,
+    FINITE, add_model_flags, check_output_file, describe, check_slope_deg, model_from_args,
     parse_range, print_json, progress, warn,
 )
 
@@ -181,7 +181,8 @@ def run_sweep(args):
     if args.png:
         from ..plotting import plot_sweep
 
-        plot_sweep(results, args.png)
+        plot_sweep(results, args.png,
+                   case=describe(args, f"{args.method}, slopes {args.slope_deg} deg"))
     summary = {}
     for fam, sw in results.items():
         n_ok = sum(r["result"] == "successful" for r in rows[fam])

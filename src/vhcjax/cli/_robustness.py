@@ -4,7 +4,7 @@ import math
 
 from .._compile import filter_jit
 from ._common import (
-    FINITE, POSITIVE, CLIError, add_model_flags, check_output_file, count,
+    FINITE, POSITIVE, CLIError, add_model_flags, check_output_file, count, describe,
     model_from_args, number, print_json, progress,
 )
 
@@ -145,7 +145,7 @@ def run_contraction(args):
     if args.png:
         from ..plotting import plot_contraction
 
-        plot_contraction(c, args.png)
+        plot_contraction(c, args.png, case=f"gait at {describe(args)}")
     if args.json:
         print_json(out)
     else:
@@ -197,7 +197,7 @@ def run_basin(args):
     if args.png:
         from ..plotting import plot_basin
 
-        plot_basin(b, args.png)
+        plot_basin(b, args.png, case=f"gait at {describe(args)}")
     if args.json:
         print_json(out)
     else:
@@ -244,10 +244,11 @@ def run_slope(args):
         from ..plotting import plot_slope, plot_terrain
 
         full = terrain_recovery(model, x_star, hs, args.steps, 0.0, stop_when_converged=False)
-        plot_terrain(np.asarray(hs), full, period, args.png, float(g.norm))
+        plot_terrain(np.asarray(hs), full, period, args.png, float(g.norm),
+                     case=f"gait at {describe(args)}")
         if not args.no_derivatives:
             plot_slope(s, args.png.removesuffix(".png") + "-slope.png",
-                       case=f"gait at {args.slope_deg:g} deg")
+                       case=f"gait at {describe(args)}")
     if args.json:
         print_json(out)
     else:
@@ -293,7 +294,8 @@ def run_push(args):
     if args.png:
         from ..plotting import plot_push
 
-        plot_push(phases, D, angles, res.largest, args.png, unit, p_max=args.max)
+        plot_push(phases, D, angles, res.largest, args.png, unit, p_max=args.max,
+                  case=f"gait at {describe(args)}")
     if args.json:
         print_json(out)
     else:

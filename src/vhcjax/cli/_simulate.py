@@ -4,7 +4,7 @@ import math
 import os
 
 from ._common import (
-    FINITE, CLIError, add_model_flags, check_output_dir, check_output_file, count,
+    FINITE, CLIError, add_model_flags, describe, check_output_dir, check_output_file, count,
     model_from_args, print_json,
 )
 
@@ -100,7 +100,7 @@ def run(args):
     if args.plots:
         from .. import plotting as plotting
         if int(sim.num_successful) > 0:
-            case = f"slope {args.slope_deg:g} deg, from x0 = {list(args.x0)}"
+            case = f"{describe(args)}, from x0 = {list(args.x0)}"
             plotting.plot_states(sim, path=os.path.join(args.plots, "states.png"), case=case)
             plotting.plot_phase_portrait(sim, path=os.path.join(args.plots, "phase.png"),
                                          case=case)

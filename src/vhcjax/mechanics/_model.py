@@ -13,6 +13,7 @@ import dataclasses
 from typing import ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -77,7 +78,8 @@ class WalkerModel(eqx.Module):
                 text = f"{a.item():.6g}" if a.ndim == 0 and a.dtype.kind in "fiu" else (
                     np.array2string(a, precision=6, separator=", ") if a.dtype.kind in "fiu"
                     else repr(v))
-            except Exception:  # a tracer (inside jit/vmap): its own repr
+            except (jax.errors.TracerArrayConversionError,
+                    jax.errors.ConcretizationTypeError):  # a tracer (inside jit/vmap)
                 text = repr(v)
             parts.append(f"{field.name}={text}")
         return f"{type(self).__name__}({', '.join(parts)})"

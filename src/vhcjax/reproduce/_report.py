@@ -718,13 +718,15 @@ def reproduce(out_dir, quick=False, progress=None):
         from ..plotting import plot_sweep
         from ..plotting import plot_multipliers_vs_slope
 
-        fig = plot_sweep(sw, os.path.join(out_dir, "sweep_families.png"))
+        fig = plot_sweep(sw, os.path.join(out_dir, "sweep_families.png"),
+                         case="default model (thesis Table 1)")
         _close(fig)
         sec.figures.append("sweep_families.png")
-        fams = {f"{f} family": mults[f][1]["transverse"] for f in mults}
+        fams = {f"{f} family": mults[f][1]["poincare"] for f in mults}
         okall = mults["stable"][0] & mults["unstable"][0]
         fig = plot_multipliers_vs_slope(slopes[okall], {k: v[okall] for k, v in fams.items()},
-                                        os.path.join(out_dir, "multipliers_vs_slope.png"))
+                                        os.path.join(out_dir, "multipliers_vs_slope.png"),
+                                        case="Poincare-map Jacobian, default model")
         if fig is not None:
             _close(fig)
         sec.figures.append("multipliers_vs_slope.png")
@@ -777,7 +779,8 @@ def reproduce(out_dir, quick=False, progress=None):
 
         fig = plot_bifurcation(diag, [("period 1", slopes[ok], np.asarray(g.T)[ok],
                                        stable1[ok])],
-                               os.path.join(out_dir, "bifurcation.png"), flips_deg=[pd])
+                               os.path.join(out_dir, "bifurcation.png"), flips_deg=[pd],
+                               case="stable family, default model (thesis Table 1)")
         _close(fig)
         sec.figures.append("bifurcation.png")
         pat = np.asarray(diag.period_pattern)
@@ -814,7 +817,7 @@ def reproduce(out_dir, quick=False, progress=None):
         z = np.asarray(state["stable3"].z)
         b = basin_slice(model, z, axes=(0, 1), half_widths=(0.08, 0.4), shape=S["basin"],
                         num_steps=S["basin_steps"], chunk=S["basin_chunk"])
-        plot_basin(b, os.path.join(out_dir, "basin_q1_dq1.png"))
+        plot_basin(b, os.path.join(out_dir, "basin_q1_dq1.png"), case="stable gait, 3 deg")
         sec.figures.append("basin_q1_dq1.png")
         counts = {n: int(np.sum(b.label == i)) for i, n in
                   enumerate(("converged", "fell", "other_cycle", "undecided"))}
@@ -843,7 +846,7 @@ def reproduce(out_dir, quick=False, progress=None):
         res = max_push(model, x_star, T, phases, angles, p_max=20.0,
                        iterations=S["push_iterations"], scan=S["push_scan"])
         plot_push(phases, D, angles, res.largest, os.path.join(out_dir, "push.png"),
-                  p_max=20.0)
+                  p_max=20.0, case="stable gait, 3 deg")
         sec.figures.append("push.png")
         j = int(np.argmin(np.where(np.isfinite(res.largest), res.largest, np.inf)))
         s, a = np.unravel_index(j, res.largest.shape)

@@ -173,7 +173,13 @@ def _gait_multipliers(model, z, config=DEFAULT_CONFIG):
     ok = code == RESULTS.successful
     pm = jnp.where(ok, pm, 0.0)
     mx = jnp.max(jnp.abs(pm))
-    tr = jnp.where(jnp.all(jnp.isfinite(tl.multipliers)), tl.multipliers, 0.0)
+    # No NaN or inf in a result: where the construction broke down its matrices are
+    # placeholders (0 where not finite); `transverse_result` says why.
+    broke = tcode != RESULTS.successful
+    tl = jax.tree_util.tree_map(
+        lambda x: jnp.where(broke & ~jnp.isfinite(x), 0.0, x) if eqx.is_inexact_array(x) else x,
+        tl)
+    tr = tl.multipliers
     return GaitMultipliers(tr, pm, mx, ok & (mx < 1.0), sr.period, sr.x_minus, code, tcode,
                            disagreement, condition, tl)
 
