@@ -13,7 +13,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, given, settings, strategies as st
+from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 import vhcjax as vj
 from vhcjax.stability import AGREEMENT_RTOL, gait_multipliers_jit, stability_json
@@ -50,6 +50,8 @@ models = st.builds(
 
 @settings(max_examples=4, **SETTINGS)
 @given(models)
+@example(vj.CompassGait(m1=4.0, m2=4.0, mH=12.0, a=0.45, b=0.55, g=9.0,
+                        psi=math.radians(4.0)))  # a gait exists: the checks run
 def test_random_models_gaits_repeat_and_multipliers_hold_or_are_flagged(model):
     g = vj.find_gait(model, "stable", "vhc", throw=False)
     _no_nan(g, "gait")
