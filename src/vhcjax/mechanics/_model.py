@@ -44,27 +44,27 @@ class WalkerModel(eqx.Module):
             if isinstance(value, float) or (isinstance(value, int) and not isinstance(value, bool)):
                 object.__setattr__(self, field.name, jnp.asarray(value, dtype=float))
 
-    #: Parameters that may be zero (the others must be positive); `psi` must be in
-    #: [0, pi/2).
-    NONNEGATIVE_FIELDS: ClassVar[tuple] = ("min_strike_angle",)
+    #: Parameters that must be positive (masses, lengths, gravity) and that must not be
+    #: negative (e.g. the slope), checked by `validate`; every float parameter must be
+    #: finite. A model names its own: the base class knows nothing of their meaning.
+    POSITIVE_FIELDS: ClassVar[tuple] = ()
+    NONNEGATIVE_FIELDS: ClassVar[tuple] = ()
 
     def validate(self):
         """Boolean (traceable, per batch member under `vmap`): every float parameter
-        finite, the slope `psi` in $[0, \\pi/2)$, the others positive (masses, lengths,
-        gravity), except `NONNEGATIVE_FIELDS`. Simulations of an invalid model end with
-        `RESULTS.bad_input`. Subclasses may narrow the ranges."""
+        finite, those in `POSITIVE_FIELDS` positive and those in `NONNEGATIVE_FIELDS`
+        non-negative. Simulations of an invalid model end with `RESULTS.bad_input`.
+        Subclasses may narrow the ranges further."""
         ok = jnp.asarray(True)
         for field in dataclasses.fields(self):
             v = getattr(self, field.name, None)
             if not eqx.is_inexact_array(v):
                 continue
             ok = ok & jnp.all(jnp.isfinite(v))
-            if field.name == "psi":
-                ok = ok & jnp.all((v >= 0) & (v < jnp.pi / 2))
+            if field.name in self.POSITIVE_FIELDS:
+                ok = ok & jnp.all(v > 0)
             elif field.name in self.NONNEGATIVE_FIELDS:
                 ok = ok & jnp.all(v >= 0)
-            else:
-                ok = ok & jnp.all(v > 0)
         return ok
 
     def __repr__(self):
