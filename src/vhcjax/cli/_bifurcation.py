@@ -45,6 +45,9 @@ def register(subparsers):
     )
     add_model_flags(q)
     q.add_argument("--family", choices=["stable", "unstable"], default="stable")
+    q.add_argument("--method", choices=["vhc", "shooting"], default="vhc",
+                   help="gait search: vhc = thesis Problem 1, shooting = Problem 2 (default "
+                   "%(default)s; the VHC search needs q1 monotone along the step)")
     q.add_argument("--png", metavar="FILE", help="save the complex-plane plot")
     q.add_argument("--json", action="store_true", help="print a JSON object")
     q.set_defaults(func=run_multipliers)
@@ -63,11 +66,16 @@ def run_multipliers(args):
 
     model = model_from_args(args)
     check_output_file(args.png, "--png")
-    fam = S.period1_family([float(model.psi)], args.family, model=model)
-    if result_names(fam.result)[0] != "successful":
-        raise CLIError(f"no {args.family} gait found at {args.slope_deg} deg")
-    m = S.with_slope(model, float(model.psi))
-    gm = S.gait_multipliers_jit(m, fam.z[0])
+    from ..gait import find_gait
+
+    # continued from the default model's gait to this model (any parameters)
+    gait = find_gait(model, args.family, args.method, throw=False)
+    if result_names(gait.result) != "successful":
+        raise CLIError(f"no {args.family} gait found at {args.slope_deg} deg by "
+                       f"{args.method} ({result_names(gait.result)}); try --method "
+                       f"{'shooting' if args.method == 'vhc' else 'vhc'}")
+    z = model.state_to_section(gait.x_plus)
+    gm = S.gait_multipliers_jit(model, z)
     tr, pc = np.asarray(gm.transverse), np.asarray(gm.poincare)
     stab = S.stability_json(gm)
     trusted = stab["multipliers"] is not None
@@ -80,12 +88,12 @@ def run_multipliers(args):
             if trusted else ([pc], ["Poincare (autodiff)"])
         plot_multipliers_complex(sets, labels, args.png,
                                  title=f"{args.family} gait, {describe(args)}")
-    out = {"slope_deg": args.slope_deg, "family": args.family, "z": np.asarray(fam.z[0]),
+    out = {"slope_deg": args.slope_deg, "family": args.family, "z": np.asarray(z),
            **stab}
     if args.json:
         print_json(out)
     else:
-        print(f"{args.family} gait at {args.slope_deg} deg: z = {np.asarray(fam.z[0])}")
+        print(f"{args.family} gait at {args.slope_deg} deg: z = {np.asarray(z)}")
         for a, b in zip(tr, pc):
             left = f"{a:.8f}" if trusted else "(not used)"
             print(f"  transverse {left}   poincare {b:.8f}")
@@ -111,6 +119,9 @@ def run_bifurcation(args):
     bar = progress(total=5, desc="bifurcation")
     fam = S.period1_family(psis, "stable", model=model)
     ok1 = np.array(result_names(fam.result)) == "successful"
+    if not ok1.any():
+        raise CLIError("no stable period-1 gait found at any slope (continued from the "
+                       "default model's 3-degree gait); check the model flags")
     bar.update(1)
     mult = S.family_multipliers(model, fam.psi, fam.z)
     stable1 = np.asarray(mult.stable) & ok1

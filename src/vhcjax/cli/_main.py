@@ -94,6 +94,14 @@ def main(argv=None):
         remove_pending()
         print(f"vhcjax {args.command}: interrupted", file=sys.stderr)
         return 130
+    except Exception as e:  # a bug, not bad input: one line, the traceback on request
+        remove_pending()
+        if os.environ.get("VHCJAX_DEBUG"):
+            raise
+        msg = " ".join(str(e).split())[:300]
+        print(f"vhcjax {args.command}: internal error: {type(e).__name__}: {msg} "
+              "(VHCJAX_DEBUG=1 shows the traceback)", file=sys.stderr)
+        return 1
 
 
 if __name__ == "__main__":

@@ -364,6 +364,10 @@ def period1_family(psis, family="stable", *, model=None, seed=None, seed_psi=mat
                 break
             zs.append(np.asarray(fp.z))
             known[float(p)] = zs[-1]
+    if not known:  # no gait at the seed (e.g. another model): every slope fails, cleanly
+        n = len(psis)
+        return Family(jnp.asarray(psis), jnp.broadcast_to(jnp.asarray(z_seed), (n, len(z_seed))),
+                      jnp.zeros(n), jax.vmap(lambda _: RESULTS.not_converged)(jnp.arange(n)))
     ps = np.array(sorted(known))
     Z = np.stack([known[p] for p in ps])
     guesses = np.stack([np.interp(psis, ps, Z[:, j]) for j in range(Z.shape[1])], axis=1)
