@@ -15,6 +15,7 @@ import subprocess
 import sys
 import time
 
+import numpy as np
 import pytest
 
 from vhcjax.cli import build_parser, main
@@ -162,6 +163,15 @@ def test_json_never_holds_nan():
     assert "NaN" not in text and "Infinity" not in text
     assert out["b"] == [1.0, None] and out["c"] == [None, 2]
     assert nulls == ["a", "b[1]", "c[0]", "d[1][0]"]
+
+
+def test_print_json_nulls_have_a_reason(capsys):
+    from vhcjax.cli import print_json
+
+    print_json({"a": float("nan"), "a_reason": "no recovery shrank 100x", "b": [1.0, np.inf]})
+    out = json.loads(capsys.readouterr().out)
+    assert out["a"] is None and out["b"] == [1.0, None]
+    assert set(out["null_fields"]) == {"b[1]"}  # "a" is explained by "a_reason"
 
 
 def test_ctrl_c_stops_reproduce_at_once(tmp_path):

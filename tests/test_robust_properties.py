@@ -126,7 +126,7 @@ def test_simulate_names_the_expected_shape():
         vj.simulate(vj.CompassGait(), x0[:3], 5)
 
 
-def test_find_gaits_nonfinite_guesses_bad_input_no_nan():
+def test_find_gaits_nonfinite_guesses_bad_input_no_nan(capsys):
     guesses = jnp.array([[0.2, -1.0], [jnp.nan, -1.0], [0.2, jnp.inf]])
     g = vj.find_gaits(vj.CompassGait(), guesses)
     assert vj.result_names(g.result) == ["successful", "bad_input", "bad_input"]
@@ -138,6 +138,13 @@ def test_find_gaits_nonfinite_guesses_bad_input_no_nan():
     for leaf in jax.tree_util.tree_leaves(g1):
         if eqx.is_inexact_array(leaf):
             assert np.all(np.isfinite(np.asarray(leaf)))
+    # the command line prints the failure, and no gait table (T = 0, speed inf before)
+    from vhcjax.cli import main
+
+    capsys.readouterr()
+    assert main(["gait", "--slope-deg", "3", "--guess", "0.5", "2.0"]) == 1
+    out = capsys.readouterr().out
+    assert "no gait:" in out and "T =" not in out and "speed" not in out
 
 
 def test_model_repr_shows_values():

@@ -87,13 +87,14 @@ def run_multipliers(args):
         sets, labels = ([tr, pc], ["transverse linearization", "Poincare (autodiff)"]) \
             if trusted else ([pc], ["Poincare (autodiff)"])
         plot_multipliers_complex(sets, labels, args.png,
-                                 title=f"{args.family} gait, {describe(args)}")
+                                 title=f"{args.family} family, {describe(args)}")
     out = {"slope_deg": args.slope_deg, "family": args.family, "z": np.asarray(z),
            **stab}
     if args.json:
         print_json(out)
     else:
-        print(f"{args.family} gait at {args.slope_deg} deg: z = {np.asarray(z)}")
+        print(f"gait of the {args.family} family at {args.slope_deg} deg ({args.method}): "
+              f"z = {np.asarray(z)}")
         for a, b in zip(tr, pc):
             left = f"{a:.8f}" if trusted else "(not used)"
             print(f"  transverse {left}   poincare {b:.8f}")
