@@ -93,6 +93,7 @@ def test_bad_numeric_value_one_line_exit_2(capsys, cmd, flag, nargs, value):
 
 @pytest.mark.parametrize("argv, message", [
     (["basin", "--grid", "20000", "20000"], "at most 4,000,000"),
+    (["contraction", "--perturbations", "100000", "--steps", "100000"], "at most 50,000,000"),
     (["sweep", "--slope-deg", "1:nan:0.5"], "finite"),
     (["sweep", "--slope-deg", "1:2:0"], "STEP > 0"),
     (["sweep", "--slope-deg", "1:1e9:1e-3"], "at most 100000"),

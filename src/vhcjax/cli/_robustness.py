@@ -13,6 +13,7 @@ STABLE_SEED = (0.2186688, -1.09238359, -0.37737395)  # stable 3-degree gait (New
 #: in memory, more in JSON; beyond this, refuse up front rather than run out of memory.
 MAX_GRID_POINTS = 4_000_000
 MAX_SAMPLES = 10_000_000
+MAX_RECOVERY_CELLS = 50_000_000  # perturbations x (steps + 1) distances kept in memory
 AXIS_NAMES = ("q1", "dq1", "dq2")
 
 
@@ -127,6 +128,11 @@ def register(subparsers):
 def run_contraction(args):
     from ..robustness import contraction
 
+    cells = args.perturbations * (args.steps + 1)
+    if cells > MAX_RECOVERY_CELLS:
+        raise CLIError(f"--perturbations {args.perturbations} x --steps {args.steps} keeps "
+                       f"{cells:,} distances (about {cells * 8 / 1e9:.1f} GB); at most "
+                       f"{MAX_RECOVERY_CELLS:,}")
     check_output_file(args.png, "--png")
     model, z, _, period, zn = _gait(args)
     c = contraction(model, z, num_perturbations=args.perturbations, scale=args.scale,
