@@ -105,7 +105,7 @@ def run_gait(args):
         rec["params"] = None
         rec["x0"] = None
         rec["reason"] = RESULTS[getattr(RESULTS, rec["result"])]
-        rec["residual"] = rec["residual"] if math.isfinite(rec["residual"]) else None
+        rec["residual"] = None  # no converged gait: the library's value is a placeholder
     stab = None
     if found and not args.no_stability:  # multipliers, two ways (issues 4, 21)
         from ..stability import gait_multipliers_jit, stability_json
