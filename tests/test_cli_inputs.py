@@ -18,9 +18,9 @@ import time
 import numpy as np
 import pytest
 
+from vhcjax._json import to_jsonable
 from vhcjax.cli import build_parser, main
 from vhcjax.cli._common import Parser, parse_range
-from vhcjax._json import to_jsonable
 
 #: Arguments each command needs besides the flag under test.
 REQUIRED = {"sweep": ["--slope-deg", "2:3:0.5"], "bifurcation": ["--slope-deg", "2:3:0.5"],
@@ -190,7 +190,7 @@ def test_ctrl_c_stops_reproduce_at_once(tmp_path):
     assert proc.poll() is None, proc.communicate()
     t0 = time.perf_counter()
     proc.send_signal(signal.SIGINT)
-    stdout, stderr = proc.communicate(timeout=30)
+    _, stderr = proc.communicate(timeout=30)
     assert time.perf_counter() - t0 < 5.0
     assert proc.returncode == 130, stderr
     assert stderr.strip().splitlines() == ["vhcjax reproduce: interrupted"], stderr

@@ -11,13 +11,13 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-import pytest  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
 
-import vhcjax as vj  # noqa: E402
-from vhcjax import plotting as P  # noqa: E402
-from vhcjax.robustness import CONVERGED, FELL  # noqa: E402
+import vhcjax as vj
+from vhcjax import plotting as P
+from vhcjax.robustness import CONVERGED, FELL
 
 CASE = "stable gait, 3.5 deg"
 RNG = np.random.default_rng(0)
