@@ -139,8 +139,9 @@ def sweep_row(gait, i, slope_deg):
     from .._results import result_names
 
     row = {"slope_deg": slope_deg, "result": result_names(gait.result._value[i])}
-    for k in PARAM_KEYS + ("step_length", "speed"):
-        row[k] = float(getattr(gait, k)[i])
+    ok = row["result"] == "successful"
+    for k in PARAM_KEYS + ("step_length", "speed"):  # no gait, no numbers (CSV: empty)
+        row[k] = float(getattr(gait, k)[i]) if ok else None
     return row
 
 
