@@ -151,3 +151,19 @@ def test_find_gaits_nonfinite_guesses_bad_input_no_nan(capsys):
 def test_model_repr_shows_values():
     text = repr(vj.CompassGait(mH=12.5))
     assert "mH=12.5" in text and "psi=0.0523599" in text and "f64[]" not in text
+
+
+states = st.tuples(st.floats(-1.2, 1.2), st.floats(-1.2, 1.2), st.floats(-5.0, 5.0),
+                   st.floats(-5.0, 5.0))
+
+
+@settings(max_examples=12, **SETTINGS)
+@given(states)
+def test_simulate_random_states_no_nan_documented_codes(x0):
+    sim = vj.simulate(vj.CompassGait(), jnp.asarray(x0), 3)
+    _no_nan(sim, "simulation")
+    names = vj.result_names(sim.steps.result)
+    _documented(names)
+    k = int(sim.num_successful)
+    assert names[:k] == ["successful"] * k
+    assert vj.result_names(sim.result) == ("successful" if k == 3 else names[k])
