@@ -60,17 +60,20 @@ for name in np.unique(names):
 # Figures (thesis Figs 7.2-7.4) and the walker animation (Fig 3.5).
 
 # %%
-try:
-    from vhcjax.plotting import _simulation as plotting
-except ImportError:  # plotting module not available in this build
-    plotting = None
-if plotting is not None:
-    import matplotlib
+import tempfile
 
-    matplotlib.use("Agg")
-    os.makedirs("notebook_out", exist_ok=True)
-    for name in ("plot_time_series", "plot_phase_portrait", "plot_step_periods"):
-        fn = getattr(plotting, name, None)
-        if fn is not None:
-            fn(sim, path=f"notebook_out/{name}.png")
-            print("wrote", f"notebook_out/{name}.png")
+import matplotlib
+
+matplotlib.use("Agg")
+from vhcjax import plotting
+
+# Figures go to $VHCJAX_NOTEBOOK_OUT, or to a fresh temporary folder: never into the
+# repository.
+OUT = os.environ.get("VHCJAX_NOTEBOOK_OUT") or tempfile.mkdtemp(prefix="vhcjax_quickstart_")
+os.makedirs(OUT, exist_ok=True)
+case = "thesis (7.5), stable gait, 3 deg"
+for name, fn in (("states", plotting.plot_states), ("phase", plotting.plot_phase_portrait),
+                 ("periods", plotting.plot_step_periods)):
+    path = os.path.join(OUT, f"01_{name}.png")
+    fn(sim, path=path, case=case)
+    print("wrote", path)

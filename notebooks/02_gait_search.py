@@ -107,7 +107,12 @@ for f, gg in fams.items():
 # %%
 from vhcjax.plotting._gait import plot_sweep  # noqa: E402
 
-os.makedirs("notebook_out", exist_ok=True)
+# Figures go to $VHCJAX_NOTEBOOK_OUT, or to a fresh temporary folder: never into the
+# repository.
+import tempfile
+
+OUT = os.environ.get("VHCJAX_NOTEBOOK_OUT") or tempfile.mkdtemp(prefix="vhcjax_notebook_")
+os.makedirs(OUT, exist_ok=True)
 sweeps = {f: vj.Sweep(jnp.radians(sl), gg, jnp.zeros((n, 3))) for f, gg in fams.items()}
-plot_sweep(sweeps, "notebook_out/02_families.png")
-print("wrote notebook_out/02_families.png")
+plot_sweep(sweeps, os.path.join(OUT, "02_families.png"))
+print("wrote", os.path.join(OUT, "02_families.png"))

@@ -28,7 +28,12 @@ from vhcjax.stability import _multipliers as S
 from vhcjax.plotting._stability import plot_bifurcation, plot_multipliers_complex
 
 FULL = os.environ.get("VHCJAX_FULL") == "1"
-os.makedirs("notebook_out", exist_ok=True)
+# Figures go to $VHCJAX_NOTEBOOK_OUT, or to a fresh temporary folder: never into the
+# repository.
+import tempfile
+
+OUT = os.environ.get("VHCJAX_NOTEBOOK_OUT") or tempfile.mkdtemp(prefix="vhcjax_notebook_")
+os.makedirs(OUT, exist_ok=True)
 
 # %% [markdown]
 # ## Both gaits at 3 degrees, both methods, one batched call
@@ -61,7 +66,7 @@ for name, t, p in zip(("stable", "unstable"), tr, pc):
 fig = plot_multipliers_complex([tr[0], pc[0], tr[1], pc[1]],
                                ["stable: transverse", "stable: Poincare",
                                 "unstable: transverse", "unstable: Poincare"],
-                               "notebook_out/03_multipliers_3deg.png", title="3 deg")
+                               os.path.join(OUT, "03_multipliers_3deg.png"), title="3 deg")
 
 # %% [markdown]
 # ## The stable family along the slope
@@ -118,6 +123,6 @@ diag = S.bifurcation_diagram(np.radians(sb), np.asarray(fb.z),
 print("pattern (steps per repetition; 0 aperiodic or unsettled, -1 fell):",
       {round(float(a), 2): int(p) for a, p in zip(sb, diag.period_pattern)})
 fig = plot_bifurcation(diag, [("period 1", sb, np.asarray(fb.periods), sb < pd_deg)],
-                       "notebook_out/03_bifurcation.png",
+                       os.path.join(OUT, "03_bifurcation.png"),
                        flips_deg=[pd_deg])
-print("wrote notebook_out/03_multipliers_3deg.png, notebook_out/03_bifurcation.png")
+print("wrote figures to", OUT)

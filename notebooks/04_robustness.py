@@ -29,7 +29,12 @@ from vhcjax.plotting._robustness import plot_basin, plot_push, plot_slope
 from vhcjax.robustness._push import max_push, push_sensitivity_autodiff
 
 FULL = os.environ.get("VHCJAX_FULL") == "1"
-os.makedirs("notebook_out", exist_ok=True)
+# Figures go to $VHCJAX_NOTEBOOK_OUT, or to a fresh temporary folder: never into the
+# repository.
+import tempfile
+
+OUT = os.environ.get("VHCJAX_NOTEBOOK_OUT") or tempfile.mkdtemp(prefix="vhcjax_notebook_")
+os.makedirs(OUT, exist_ok=True)
 model = vj.CompassGait(psi=math.radians(3.0))
 
 # %% [markdown]
@@ -54,7 +59,7 @@ b = vj.basin_slice(model, z_star, axes=(0, 1), half_widths=(0.08, 0.4), shape=sh
 print(f"converging fraction {b.fraction:.3f}, area {b.area:.4g} rad^2/s")
 print("largest converging offsets along the grid lines:",
       {k: round(float(v), 4) for k, v in b.max_converging.items()})
-plot_basin(b, "notebook_out/04_basin.png")
+plot_basin(b, os.path.join(OUT, "04_basin.png"))
 
 # %% [markdown]
 # ## Pushes at the hip
@@ -71,7 +76,7 @@ res = max_push(model, x_star, T, phases, angles, p_max=20.0,
 for j, a in enumerate(angles):
     print(f"direction {math.degrees(a):5.0f} deg: largest impulse survived (N s) "
           f"{np.round(res.largest[:, j], 3)}")
-plot_push(phases, D, angles, res.largest, "notebook_out/04_push.png", p_max=20.0)
+plot_push(phases, D, angles, res.largest, os.path.join(OUT, "04_push.png"), p_max=20.0)
 
 # %% [markdown]
 # ## Sensitivity to the slope (full mode)
@@ -83,5 +88,5 @@ plot_push(phases, D, angles, res.largest, "notebook_out/04_push.png", p_max=20.0
 if FULL:
     sens = vj.slope_sensitivity(model, z_star)
     print("dz*/dpsi =", np.asarray(sens.dz), " dT/dpsi =", float(sens.dperiod))
-    plot_slope(sens, "notebook_out/04_slope.png")
-print("wrote notebook_out/04_basin.png, notebook_out/04_push.png")
+    plot_slope(sens, os.path.join(OUT, "04_slope.png"))
+print("wrote figures to", OUT)

@@ -21,8 +21,17 @@ def test_notebook_runs(path, tmp_path, monkeypatch):
     import matplotlib.pyplot as plt
 
     monkeypatch.delenv("VHCJAX_FULL", raising=False)
-    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "figures"
+    monkeypatch.setenv("VHCJAX_NOTEBOOK_OUT", str(out))
+    work = tmp_path / "cwd"
+    work.mkdir()
+    monkeypatch.chdir(work)
     try:
         runpy.run_path(str(path), run_name="__main__")
     finally:
         plt.close("all")
+    # Nothing written into the working directory (the repository, when run by hand).
+    assert list(work.iterdir()) == []
+    if path.name == "01_quickstart.py":  # thesis Figs 7.2-7.4, drawn (no silent skip)
+        assert {p.name for p in out.iterdir()} >= {"01_states.png", "01_phase.png",
+                                                   "01_periods.png"}

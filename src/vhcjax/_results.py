@@ -31,6 +31,20 @@ class RESULTS(eqx.Enumeration):
     bad_input = "Invalid input (non-positive mass or length, slope out of range, or NaN)."
     other_cycle = "Settled on a different cycle (not the target gait)."
     undecided = "Neither converged to the gait, nor fell, nor settled on a cycle in the step budget."
+    phase_not_monotone = (
+        "The phase variable q1 is not monotone along the orbit: the transverse "
+        "linearization (thesis ch. 6) does not apply; the Poincare-map Jacobian decides."
+    )
+    ill_conditioned = (
+        "The transverse coordinates are ill-conditioned (condition number of [L; m^T] "
+        "above 1e8, or the flow nearly tangent to an impact surface); the Poincare-map "
+        "Jacobian decides."
+    )
+    methods_disagree = (
+        "The transverse linearization and the Poincare-map Jacobian disagree by more than "
+        "1e-6 (relative to the spectral radius), or the transverse construction does not "
+        "reproduce the orbit; the Poincare-map Jacobian decides."
+    )
 
 
 def result_names(result) -> list[str] | str:

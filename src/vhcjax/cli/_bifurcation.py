@@ -3,8 +3,11 @@ multipliers in the complex plane."""
 
 import math
 
-from ._common import CLIError, add_model_flags, check_slope_deg, model_from_args, parse_range, \
-    print_json, progress
+from ._common import (
+    CLIError, add_model_flags, check_output_file, check_slope_deg, count, describe,
+    model_from_args,
+    parse_range, print_json, progress, warn,
+)
 
 
 def register(subparsers):
@@ -20,9 +23,10 @@ def register(subparsers):
     add_model_flags(p, slope=False)
     p.add_argument("--slope-deg", required=True, metavar="START:STOP:STEP",
                    help="slopes in degrees, e.g. 0.5:5.5:0.01")
-    p.add_argument("--transient", type=int, default=300,
+    p.add_argument("--transient", type=count(0, 100_000), default=300,
                    help="steps discarded as transient (default 300)")
-    p.add_argument("--record", type=int, default=64, help="steps recorded (default 64)")
+    p.add_argument("--record", type=count(1, 10_000), default=64,
+                   help="steps recorded (default 64)")
     p.add_argument("--csv", metavar="FILE",
                    help="write slope_deg, result, pattern, period_1..period_RECORD (pattern: "
                    "steps per repetition, 0 aperiodic, -1 fell)")
@@ -41,6 +45,9 @@ def register(subparsers):
     )
     add_model_flags(q)
     q.add_argument("--family", choices=["stable", "unstable"], default="stable")
+    q.add_argument("--method", choices=["vhc", "shooting"], default="vhc",
+                   help="gait search: vhc = thesis Problem 1, shooting = Problem 2 (default "
+                   "%(default)s; the VHC search needs q1 monotone along the step)")
     q.add_argument("--png", metavar="FILE", help="save the complex-plane plot")
     q.add_argument("--json", action="store_true", help="print a JSON object")
     q.set_defaults(func=run_multipliers)
@@ -58,27 +65,42 @@ def run_multipliers(args):
     from .._results import result_names
 
     model = model_from_args(args)
-    fam = S.period1_family([float(model.psi)], args.family, model=model)
-    if result_names(fam.result)[0] != "successful":
-        raise CLIError(f"no {args.family} gait found at {args.slope_deg} deg")
-    m = S.with_slope(model, float(model.psi))
-    gm = S.gait_multipliers_jit(m, fam.z[0])
+    check_output_file(args.png, "--png")
+    from ..gait import find_gait
+
+    # continued from the default model's gait to this model (any parameters)
+    gait = find_gait(model, args.family, args.method, throw=False)
+    if result_names(gait.result) != "successful":
+        raise CLIError(f"no {args.family} gait found at {args.slope_deg} deg by "
+                       f"{args.method} ({result_names(gait.result)}); try --method "
+                       f"{'shooting' if args.method == 'vhc' else 'vhc'}")
+    z = model.state_to_section(gait.x_plus)
+    gm = S.gait_multipliers_jit(model, z)
     tr, pc = np.asarray(gm.transverse), np.asarray(gm.poincare)
+    stab = S.stability_json(gm)
+    trusted = stab["multipliers"] is not None
+    if not trusted:
+        warn(args, stab["multipliers_reason"])
     if args.png:
         from ..plotting import plot_multipliers_complex
 
-        plot_multipliers_complex([tr, pc], ["transverse linearization", "Poincare (autodiff)"],
-                                 args.png, title=f"{args.family} gait, {args.slope_deg} deg")
-    out = {"slope_deg": args.slope_deg, "family": args.family, "z": np.asarray(fam.z[0]),
-           "multipliers": _c(tr), "multipliers_poincare": _c(pc),
-           "max_abs_multiplier": float(np.max(np.abs(tr))), "stable": bool(gm.stable)}
+        sets, labels = ([tr, pc], ["transverse linearization", "Poincare (autodiff)"]) \
+            if trusted else ([pc], ["Poincare (autodiff)"])
+        plot_multipliers_complex(sets, labels, args.png,
+                                 title=f"{args.family} family, {describe(args)}")
+    out = {"slope_deg": args.slope_deg, "family": args.family, "z": np.asarray(z),
+           **stab}
     if args.json:
         print_json(out)
     else:
-        print(f"{args.family} gait at {args.slope_deg} deg: z = {np.asarray(fam.z[0])}")
+        print(f"gait of the {args.family} family at {args.slope_deg} deg ({args.method}): "
+              f"z = {np.asarray(z)}")
         for a, b in zip(tr, pc):
-            print(f"  transverse {a:.8f}   poincare {b:.8f}")
-        print("  stable" if bool(gm.stable) else "  unstable")
+            left = f"{a:.8f}" if trusted else "(not used)"
+            print(f"  transverse {left}   poincare {b:.8f}")
+        verdict = "stable" if stab["stable"] else "unstable"
+        print(f"  verdict: {verdict} (largest |multiplier| {stab['max_abs_multiplier']:.8g}, "
+              "Poincare-map Jacobian)")
     return 0
 
 
@@ -91,13 +113,16 @@ def run_bifurcation(args):
     slopes = parse_range(args.slope_deg)
     for s in slopes:
         check_slope_deg(s)
-    if args.transient < 0 or args.record < 1:
-        raise CLIError("--transient must be >= 0 and --record >= 1")
     model = model_from_args(args, slope_deg=slopes[0])
+    for flag in ("csv", "png", "png_multipliers"):
+        check_output_file(getattr(args, flag), "--" + flag.replace("_", "-"))
     psis = np.radians(slopes)
     bar = progress(total=5, desc="bifurcation")
     fam = S.period1_family(psis, "stable", model=model)
     ok1 = np.array(result_names(fam.result)) == "successful"
+    if not ok1.any():
+        raise CLIError("no stable period-1 gait found at any slope (continued from the "
+                       "default model's 3-degree gait); check the model flags")
     bar.update(1)
     mult = S.family_multipliers(model, fam.psi, fam.z)
     stable1 = np.asarray(mult.stable) & ok1
@@ -124,7 +149,9 @@ def run_bifurcation(args):
     bar.close()
     names = result_names(diag.result)
     if args.csv:
-        with open(args.csv, "w") as f:
+        from .._io import atomic_open
+
+        with atomic_open(args.csv, "w") as f:
             f.write("slope_deg,result,pattern,"
                     + ",".join(f"period_{i + 1}" for i in range(args.record)) + "\n")
             for s, r, nd, per in zip(slopes, names, diag.period_pattern, diag.periods):
@@ -137,13 +164,16 @@ def run_bifurcation(args):
         if branch2 is not None and len(branch2["psi"]):
             branches.append(("period 2", np.degrees(branch2["psi"]), branch2["periods"],
                              branch2["stable"]))
-        plot_bifurcation(diag, branches, args.png, flips_deg=[math.degrees(f) for f in flips])
+        plot_bifurcation(diag, branches, args.png, flips_deg=[math.degrees(f) for f in flips],
+                         case=describe(args, f"slopes {args.slope_deg} deg"))
     if args.png_multipliers:
         from ..plotting import plot_multipliers_vs_slope
 
         plot_multipliers_vs_slope(np.degrees(psis)[ok1],
-                                  {"stable family": np.asarray(mult.transverse)[ok1]},
-                                  args.png_multipliers)
+                                  {"stable family": np.asarray(mult.poincare)[ok1]},
+                                  args.png_multipliers,
+                                  case="Poincare-map Jacobian, "
+                                  + describe(args, f"slopes {args.slope_deg} deg"))
     fell = np.asarray(diag.fell)
     out = {
         "period_doubling_slopes_deg": [math.degrees(f) for f in flips],

@@ -1,11 +1,113 @@
 """What the subcommands share: model flags, input checks, JSON output, progress bars."""
 
 import json
+import argparse
 import math
+import os
+import re
 import sys
+import tempfile
+
 
 class CLIError(Exception):
     """A user error: printed as one line, exit status 2."""
+
+
+class ArgumentError(Exception):
+    """An argparse error (unknown flag, bad value): printed as one line, exit status 2."""
+
+
+class Parser(argparse.ArgumentParser):
+    """`argparse.ArgumentParser` whose errors are one line (raised as `ArgumentError`, so
+    that in-process callers of `main` get exit status 2 and no `SystemExit`), and which
+    reads a negative number in scientific notation (`-1e6`), `-inf` and `-nan` as a value,
+    not as an option (argparse alone only knows `-12` and `-1.5`)."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = re.compile(
+            r"^-(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|inf|infinity|nan)$", re.IGNORECASE)
+
+    def error(self, message):
+        # "argument --x0: must be ..." -> "--x0 must be ...", as the model-flag checks say
+        m = re.fullmatch(r"argument ([^:]+): (must .*)", message)
+        if m:
+            message = f"{m[1]} {m[2]}"
+        raise ArgumentError(f"{self.prog}: error: {message}")
+
+
+def number(kind=float, *, lo=None, hi=None, lo_open=False, hi_open=False):
+    """An argparse `type` for a finite number of `kind` (float or int) in the range
+    `lo`..`hi` (inclusive unless `lo_open` / `hi_open`): NaN, inf and values out of the
+    range are refused before any work, with a one-line message."""
+
+    def parse(text):
+        try:
+            v = float(text) if kind is float else int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected {'a number' if kind is float else 'an integer'}, got {text!r}"
+            ) from None
+        if not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+        low_bad = lo is not None and (v <= lo if lo_open else v < lo)
+        high_bad = hi is not None and (v >= hi if hi_open else v > hi)
+        if low_bad or high_bad:
+            left = "-inf" if lo is None else f"{lo:g}"
+            right = "inf" if hi is None else f"{hi:g}"
+            raise argparse.ArgumentTypeError(
+                f"must be in {'(' if lo_open or lo is None else '['}{left}, {right}"
+                f"{')' if hi_open or hi is None else ']'}, got {text}")
+        return v
+
+    parse.__name__ = kind.__name__
+    parse.bounds = (kind, lo, hi, lo_open, hi_open)  # for the tests of every flag
+    return parse
+
+
+FINITE = number(float)
+POSITIVE = number(float, lo=0.0, lo_open=True)
+NONNEGATIVE = number(float, lo=0.0)
+
+
+def count(lo=1, hi=100_000):
+    """An integer in [`lo`, `hi`]."""
+    return number(int, lo=lo, hi=hi)
+
+
+def check_output_file(path, flag):
+    """Refuse, before any work, an output file that cannot be written: a missing or
+    unwritable folder, a directory, a read-only file. Nothing is left behind."""
+    if path is None:
+        return
+    folder = os.path.dirname(os.path.abspath(path)) or "."
+    if os.path.isdir(path):
+        raise CLIError(f"{flag} {path!r} is a directory")
+    if not os.path.isdir(folder):
+        raise CLIError(f"{flag} {path!r}: folder {folder!r} does not exist")
+    existed = os.path.exists(path)
+    try:
+        with open(path, "a"):
+            pass
+    except OSError as e:
+        raise CLIError(f"{flag} {path!r} cannot be written: {e.strerror}") from None
+    if not existed:
+        os.remove(path)
+
+
+def check_output_dir(path, flag):
+    """Create the output folder `path` (and its parents) now and check that a file can be
+    written into it, before any work."""
+    if path is None:
+        return
+    if os.path.exists(path) and not os.path.isdir(path):
+        raise CLIError(f"{flag} {path!r} exists and is not a directory")
+    try:
+        os.makedirs(path, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=path, prefix=".vhcjax-write-test-"):
+            pass
+    except OSError as e:
+        raise CLIError(f"{flag} {path!r} cannot be written: {e.strerror}") from None
 
 
 def add_model_flags(parser, *, slope=True, slope_default=3.0):
@@ -95,8 +197,22 @@ def model_from_args(args, slope_deg=None):
     )
 
 
+def describe(args, slope_deg=None):
+    """The case in words for figure titles: the slope and the parameters that differ
+    from thesis Table 1, e.g. `"slope 3 deg, mH 0.1 kg, m 10 kg"`."""
+    slope = args.slope_deg if slope_deg is None else slope_deg
+    parts = [slope if isinstance(slope, str) else f"slope {slope:g} deg"]
+    for flag, default, label in (("mass_hip", 10.0, "mH {} kg"), ("mass_leg", 5.0, "m {} kg"),
+                                 ("a", 0.5, "a {} m"), ("b", 0.5, "b {} m"),
+                                 ("gravity", 9.81, "g {} m/s^2")):
+        v = getattr(args, flag)
+        if v != default:
+            parts.append(label.format(f"{v:g}"))
+    return ", ".join(parts)
+
+
 def parse_range(text, name="--slope-deg"):
-    """`START:STOP:STEP` (inclusive of STOP within half a step) -> list of floats."""
+    """`START:STOP:STEP` (STOP included when on the grid, never passed) -> list of floats."""
     try:
         parts = [float(p) for p in text.split(":")]
     except ValueError:
@@ -107,7 +223,10 @@ def parse_range(text, name="--slope-deg"):
     check_finite(name, start, stop, step)
     if step <= 0 or stop < start:
         raise CLIError(f"{name} needs STEP > 0 and STOP >= START, got {text!r}")
-    n = int(math.floor((stop - start) / step + 0.5)) + 1
+    # STOP is included when it lies within 1e-9 of a step of the grid; nothing past it.
+    n = math.floor((stop - start) / step + 1e-9) + 1
+    if n > 100_000:
+        raise CLIError(f"{name} {text!r} gives {n} values; at most 100000")
     return [start + i * step for i in range(n)]
 
 
@@ -115,7 +234,21 @@ from .._json import to_jsonable as to_jsonable
 
 
 def print_json(obj):
-    print(json.dumps(to_jsonable(obj)))
+    """Print `obj` as strict JSON: non-finite numbers become `null`, and a dict gains
+    `"null_fields"`, the paths of those not explained by a `"<field>_reason"` key."""
+    nulls = []
+    out = to_jsonable(obj, nulls)
+    unexplained = [p for p in nulls if isinstance(out, dict)
+                   and f"{p.split('.')[0].split('[')[0]}_reason" not in out]
+    if unexplained and isinstance(out, dict):
+        out["null_fields"] = {p: "not a finite number (NaN or infinity): undefined here"
+                              for p in unexplained}
+    print(json.dumps(out, allow_nan=False))
+
+
+def warn(args, message):
+    """A one-line warning on stderr."""
+    print(f"vhcjax {args.command}: warning: {message}", file=sys.stderr)
 
 
 #: Set by `--quiet` (every command has it): no progress bars, no notes on stderr.

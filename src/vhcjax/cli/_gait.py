@@ -5,17 +5,20 @@ import csv
 import math
 
 from ._common import (
-    CLIError, add_model_choice, add_model_flags, check_slope_deg, kneed_from_args,
-    model_from_args, parse_range, print_json, progress,
+    FINITE, CLIError, add_model_choice, add_model_flags, check_output_file, check_slope_deg,
+    describe, kneed_from_args, model_from_args, parse_range, print_json, progress, warn,
 )
 
 #: CSV columns of `vhcjax sweep` (`sweep_row` writes them; append new ones at the end).
 CSV_COLUMNS = [
     "slope_deg", "result", "a", "b", "c", "d", "e", "f", "g", "h", "T", "E0",
     "step_length", "speed",
-    # stability (issue 4): transverse-linearization multipliers, by modulus
+    # stability: transverse-linearization multipliers, by modulus
     "mult1_re", "mult1_im", "mult2_re", "mult2_im", "mult3_re", "mult3_im",
     "max_abs_multiplier", "stable",
+    # mult1..3 are empty where the transverse linearization is not trusted;
+    # max_abs_multiplier and stable come from the Poincare-map Jacobian
+    "transverse_result",
 ]
 PARAM_KEYS = ("a", "b", "c", "d", "e", "f", "g", "h", "T", "E0")
 
@@ -32,13 +35,16 @@ def register(subparsers):
     add_model_flags(p)
     add_model_choice(p)
     _family_method(p, both=False)
-    p.add_argument("--guess", type=float, nargs="+", metavar="X",
+    p.add_argument("--guess", type=FINITE, nargs="+", metavar="X",
                    help="initial guess for q1 (rad) and dq1 (rad/s) just after impact, e.g. "
                    "the thesis seed 0.20 -1.0 (shooting: optionally dq2 too; kneed walker: "
                    "q1 dq1 dq2); default: continuation, no guess needed")
     p.add_argument("--json", action="store_true",
                    help='print {"result", "slope_deg", "family", "method", "x0", "params", '
-                   '"iterations", "residual"}')
+                   '"iterations", "residual"} and, for a gait found, its multipliers and '
+                   'stability verdict')
+    p.add_argument("--no-stability", action="store_true",
+                   help="skip the multipliers and the stability verdict (faster)")
     p.set_defaults(func=run_gait)
 
     s = subparsers.add_parser(
@@ -96,8 +102,6 @@ def run_gait(args):
     from ..gait import find_gait
 
     if args.guess is not None:
-        if not all(math.isfinite(v) for v in args.guess):
-            raise CLIError(f"--guess must be finite, got {args.guess}")
         sizes = (3,) if args.model == "kneed" else (2, 3) if args.method == "shooting" else (2,)
         if len(args.guess) not in sizes:
             raise CLIError(f"--guess takes {' or '.join(map(str, sizes))} numbers here, "
@@ -105,24 +109,43 @@ def run_gait(args):
     if args.model == "kneed":
         return _run_kneed_gait(args)
     model = model_from_args(args)
-    guess = None
-    if args.guess is not None:
-        guess = jnp.asarray(args.guess)
+    guess = None if args.guess is None else jnp.asarray(args.guess)
     gait = find_gait(model, args.family, args.method, guess, throw=False)
     rec = gait_json(gait, args.slope_deg)
-    if args.json and rec["result"] == "successful":  # multipliers, two ways (issue 4)
+    found = rec["result"] == "successful"
+    if not found:  # a failed search has no gait: no parameters, no stability
+        from .._results import RESULTS
+
+        rec["params"] = None
+        rec["x0"] = None
+        rec["reason"] = RESULTS[getattr(RESULTS, rec["result"])]
+        rec["residual"] = None  # no converged gait: the library's value is a placeholder
+    stab = None
+    if found and not args.no_stability:  # multipliers, two ways
         from ..stability import gait_multipliers_jit, stability_json
 
-        rec.update(stability_json(gait_multipliers_jit(model, model.state_to_section(gait.x_plus))))
+        stab = stability_json(gait_multipliers_jit(model, model.state_to_section(gait.x_plus)))
+        rec.update(stab)
+        if stab.get("multipliers_reason"):
+            warn(args, stab["multipliers_reason"])
     if args.json:
         print_json(rec)
-    else:
-        print(f"{args.family} gait at {args.slope_deg} deg ({args.method}): {rec['result']}")
-        for k, v in rec["params"].items():
-            print(f"  {k:>3} = {v: .9f}")
-        print(f"  step length {float(gait.step_length):.6f} m, speed {float(gait.speed):.6f} m/s, "
-              f"{rec['iterations']} iterations, residual {rec['residual']:.2e}")
-    return 0 if rec["result"] == "successful" else 1
+        return 0 if found else 1
+    print(f"gait search at {args.slope_deg} deg (family {args.family}, method {args.method}): "
+          f"{rec['result']}")
+    if not found:
+        print(f"  no gait: {rec['reason']}")
+        return 1
+    for k, v in rec["params"].items():
+        print(f"  {k:>3} = {v: .9f}")
+    print(f"  step length {float(gait.step_length):.6f} m, speed {float(gait.speed):.6f} m/s, "
+          f"{rec['iterations']} iterations, residual {rec['residual']:.2e}")
+    if stab is not None:
+        mods = ", ".join(f"{abs(complex(*e)):.6g}" for e in stab["multipliers_poincare"])
+        verdict = "stable" if stab["stable"] else "unstable"
+        print(f"  verdict: {verdict} (largest |multiplier| {stab['max_abs_multiplier']:.6g}; "
+              f"Poincare-map moduli {mods})")
+    return 0
 
 
 def _run_kneed_gait(args):
@@ -166,8 +189,9 @@ def sweep_row(gait, i, slope_deg):
     from .._results import result_names
 
     row = {"slope_deg": slope_deg, "result": result_names(gait.result._value[i])}
-    for k in PARAM_KEYS + ("step_length", "speed"):
-        row[k] = float(getattr(gait, k)[i])
+    ok = row["result"] == "successful"
+    for k in PARAM_KEYS + ("step_length", "speed"):  # no gait, no numbers (CSV: empty)
+        row[k] = float(getattr(gait, k)[i]) if ok else None
     return row
 
 
@@ -178,6 +202,8 @@ def run_sweep(args):
     for v in slopes:
         check_slope_deg(v)
     model = model_from_args(args, slope_deg=slopes[0])
+    check_output_file(args.csv, "--csv")
+    check_output_file(args.png, "--png")
     families = ("stable", "unstable") if args.family == "both" else (args.family,)
     results = {}
     bar = progress(total=len(families), desc="sweep")
@@ -188,13 +214,15 @@ def run_sweep(args):
     bar.close()
     rows = {fam: [sweep_row(sw.gaits, i, v) for i, v in enumerate(slopes)]
             for fam, sw in results.items()}
-    if args.csv:  # multipliers of every gait in one batched call (issue 4)
+    if args.csv:  # multipliers of every gait in one batched call
         from ..stability import add_stability_columns
 
         for fam, sw in results.items():
             add_stability_columns(model, sw.gaits, [math.radians(v) for v in slopes], rows[fam])
     if args.csv:
-        with open(args.csv, "w", newline="") as fh:
+        from .._io import atomic_open
+
+        with atomic_open(args.csv, "w", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=(["family"] if len(families) > 1 else [])
                                + CSV_COLUMNS, extrasaction="ignore")
             w.writeheader()
@@ -204,7 +232,8 @@ def run_sweep(args):
     if args.png:
         from ..plotting import plot_sweep
 
-        plot_sweep(results, args.png)
+        plot_sweep(results, args.png,
+                   case=describe(args, f"{args.method}, slopes {args.slope_deg} deg"))
     summary = {}
     for fam, sw in results.items():
         n_ok = sum(r["result"] == "successful" for r in rows[fam])

@@ -1,6 +1,6 @@
 """`vhcjax reproduce`: recompute thesis chapter 7 and write figures and a report."""
 
-from ._common import CLIError, progress
+from ._common import check_output_dir, progress
 
 
 def register(subparsers):
@@ -27,8 +27,7 @@ def run_reproduce(args):
 
     from ..reproduce import N_SECTIONS, reproduce
 
-    if os.path.exists(args.out) and not os.path.isdir(args.out):
-        raise CLIError(f"--out {args.out!r} exists and is not a directory")
+    check_output_dir(args.out, "--out")
     bar = progress(total=N_SECTIONS, desc="reproduce", disable=True if args.quiet else None)
     res = reproduce(args.out, quick=args.quick, progress=bar)
     bar.close()

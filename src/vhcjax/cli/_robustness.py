@@ -2,15 +2,23 @@
 
 import math
 
-from ._common import CLIError, add_model_flags, check_finite, model_from_args, print_json, progress
+from ._common import (
+    FINITE, POSITIVE, CLIError, add_model_flags, check_output_file, count, describe,
+    model_from_args, number, print_json, progress,
+)
 
 STABLE_SEED = (0.2186688, -1.09238359, -0.37737395)  # stable 3-degree gait (Newton seed)
+#: Largest basin grid (points): each point is a simulation and some 100 bytes of results
+#: in memory, more in JSON; beyond this, refuse up front rather than run out of memory.
+MAX_GRID_POINTS = 4_000_000
+MAX_SAMPLES = 10_000_000
+MAX_RECOVERY_CELLS = 50_000_000  # perturbations x (steps + 1) distances kept in memory
 AXIS_NAMES = ("q1", "dq1", "dq2")
 
 
 def _common(p, png_help):
     add_model_flags(p)
-    p.add_argument("--gait", type=float, nargs=3, metavar=("Q1", "DQ1", "DQ2"),
+    p.add_argument("--gait", type=FINITE, nargs=3, metavar=("Q1", "DQ1", "DQ2"),
                    default=list(STABLE_SEED),
                    help="Newton seed for the gait: post-impact q1 (rad), dq1, dq2 (rad/s); "
                    "default: the stable 3-degree gait")
@@ -28,7 +36,6 @@ def _gait(args):
     from ..hybrid import fixed_point
     from .._results import result_names
 
-    check_finite("--gait", *args.gait)
     model = model_from_args(args)
     fp = eqx.filter_jit(fixed_point)(model, jnp.asarray(args.gait, float))
     if result_names(fp.result) != "successful":
@@ -47,9 +54,12 @@ def register(subparsers):
         description="Spectral radius of the step map at the gait, steps to shrink an error "
         "10x and 100x, and the decay rate measured from simulated recoveries.")
     _common(p, "save the recovery curves with the rho^k prediction")
-    p.add_argument("--perturbations", type=int, default=32, help="simulated recoveries")
-    p.add_argument("--scale", type=float, default=1e-3, help="size of the perturbations")
-    p.add_argument("--steps", type=int, default=30, help="steps per recovery")
+    p.add_argument("--perturbations", type=count(1, 100_000), default=32,
+                   help="simulated recoveries (1 to 100000)")
+    p.add_argument("--scale", type=number(float, lo=0.0, hi=0.5, lo_open=True), default=1e-3,
+                   help="size of the perturbations, in (0, 0.5]")
+    p.add_argument("--steps", type=count(8, 100_000), default=30,
+                   help="steps per recovery (8 to 100000)")
     p.set_defaults(func=run_contraction)
 
     p = subparsers.add_parser(
@@ -60,15 +70,20 @@ def register(subparsers):
         "estimate of the basin's volume fraction in a 3-D box.")
     _common(p, "save the basin slice coloured by steps to converge")
     p.add_argument("--axes", default="q1,dq1", help="two of q1,dq1,dq2 (default q1,dq1)")
-    p.add_argument("--half-widths", type=float, nargs=2, default=[0.08, 0.4],
+    p.add_argument("--half-widths", type=POSITIVE, nargs=2, default=[0.08, 0.4],
                    help="grid half widths along the two axes (default 0.08 0.4)")
-    p.add_argument("--grid", type=int, nargs=2, default=[200, 200], help="grid points")
-    p.add_argument("--steps", type=int, default=50, help="steps simulated per point")
-    p.add_argument("--tol", type=float, default=1e-4, help="convergence tolerance")
-    p.add_argument("--chunk", type=int, default=1024, help="batch size of one call")
-    p.add_argument("--volume-samples", type=int, default=0,
+    p.add_argument("--grid", type=count(2, MAX_GRID_POINTS // 2), nargs=2, default=[200, 200],
+                   help=f"grid points along each axis (at least 2; at most {MAX_GRID_POINTS} "
+                   "in all)")
+    p.add_argument("--steps", type=count(1, 100_000), default=50,
+                   help="steps simulated per point")
+    p.add_argument("--tol", type=number(float, lo=0.0, hi=1.0, lo_open=True), default=1e-4,
+                   help="convergence tolerance, in (0, 1]")
+    p.add_argument("--chunk", type=count(1, 1_000_000), default=1024,
+                   help="batch size of one call")
+    p.add_argument("--volume-samples", type=count(0, MAX_SAMPLES), default=0,
                    help="Monte-Carlo samples for the 3-D volume fraction (0: skip)")
-    p.add_argument("--box", type=float, nargs=3, default=[0.05, 0.2, 0.5],
+    p.add_argument("--box", type=POSITIVE, nargs=3, default=[0.05, 0.2, 0.5],
                    help="half widths of the 3-D box (q1, dq1, dq2)")
     p.set_defaults(func=run_basin)
 
@@ -78,9 +93,10 @@ def register(subparsers):
         "the slope (implicit differentiation), the largest single step up/down survived, "
         "recovery curves and the gait sensitivity norm for floor-height disturbances.")
     _common(p, "save the recovery after floor steps (and <FILE>-slope.png: derivatives)")
-    p.add_argument("--heights-mm", type=float, nargs="+", default=[-15, -12, -5, 2, 5],
+    p.add_argument("--heights-mm", type=number(float, lo=-500.0, hi=500.0), nargs="+", default=[-15, -12, -5, 2, 5],
                    help="floor steps (mm, + up) for the recovery curves")
-    p.add_argument("--steps", type=int, default=40, help="steps after the floor step")
+    p.add_argument("--steps", type=count(1, 100_000), default=40,
+                   help="steps after the floor step")
     p.add_argument("--no-derivatives", action="store_true",
                    help="skip the slope derivatives (long first compilation)")
     p.set_defaults(func=run_slope)
@@ -91,14 +107,18 @@ def register(subparsers):
         "function of the phase of the step (autodiff; with --check also the transverse "
         "linearization), and the largest push survived per phase and direction.")
     _common(p, "save sensitivity and largest push vs phase")
-    p.add_argument("--phases", type=int, default=20, help="phases in [0, 1) (default 20)")
-    p.add_argument("--directions-deg", type=float, nargs="+", default=[0, 90, 180, 270],
+    p.add_argument("--phases", type=count(1, 10_000), default=20,
+                   help="phases in [0, 1) (default 20)")
+    p.add_argument("--directions-deg", type=FINITE, nargs="+", default=[0, 90, 180, 270],
                    help="push directions, degrees from forward, counter-clockwise")
-    p.add_argument("--duration", type=float, default=0.0,
+    p.add_argument("--duration", type=number(float, lo=0.0, hi=10.0), default=0.0,
                    help="pulse duration in s (0: instantaneous impulse, magnitudes in N s)")
-    p.add_argument("--max", type=float, default=20.0, help="bisection upper bound")
-    p.add_argument("--iterations", type=int, default=12, help="bisection halvings")
-    p.add_argument("--steps", type=int, default=30, help="steps after the push")
+    p.add_argument("--max", type=number(float, lo=0.0, hi=1e6, lo_open=True), default=20.0,
+                   help="bisection upper bound")
+    p.add_argument("--iterations", type=count(1, 60), default=12,
+                   help="bisection halvings (1 to 60)")
+    p.add_argument("--steps", type=count(1, 100_000), default=30,
+                   help="steps after the push")
     p.add_argument("--check", action="store_true",
                    help="also compute the sensitivity by transverse linearization")
     p.set_defaults(func=run_push)
@@ -107,8 +127,12 @@ def register(subparsers):
 def run_contraction(args):
     from ..robustness import contraction
 
-    if args.perturbations < 1 or args.steps < 8 or not args.scale > 0:
-        raise CLIError("need --perturbations >= 1, --steps >= 8, --scale > 0")
+    cells = args.perturbations * (args.steps + 1)
+    if cells > MAX_RECOVERY_CELLS:
+        raise CLIError(f"--perturbations {args.perturbations} x --steps {args.steps} keeps "
+                       f"{cells:,} distances (about {cells * 8 / 1e9:.1f} GB); at most "
+                       f"{MAX_RECOVERY_CELLS:,}")
+    check_output_file(args.png, "--png")
     model, z, _, period, zn = _gait(args)
     c = contraction(model, z, num_perturbations=args.perturbations, scale=args.scale,
                     num_steps=args.steps, fit_window=(5, args.steps))
@@ -119,19 +143,24 @@ def run_contraction(args):
         "measured_steps_10x": c.measured_steps_10x,
         "measured_steps_100x": c.measured_steps_100x,
     }
+    for k, f in (("10x", 10), ("100x", 100)):
+        if not math.isfinite(float(out[f"measured_steps_{k}"])):
+            out[f"measured_steps_{k}_reason"] = (
+                f"no recovery shrank its error {f}x within --steps {args.steps} steps")
     if args.png:
         from ..plotting import plot_contraction
 
-        plot_contraction(c, args.png)
+        plot_contraction(c, args.png, case=f"gait at {describe(args)}")
     if args.json:
         print_json(out)
     else:
         print(f"spectral radius {float(c.spectral_radius):.6f} (multipliers); measured "
               f"{float(c.measured_rate):.6f} from {args.perturbations} recoveries")
-        print(f"steps to shrink an error 10x: {float(c.steps_10x):.2f} predicted, "
-              f"{float(c.measured_steps_10x):.0f} measured (median, transient included)")
-        print(f"steps to shrink an error 100x: {float(c.steps_100x):.2f} predicted, "
-              f"{float(c.measured_steps_100x):.0f} measured")
+        for k in ("10x", "100x"):
+            m = float(out[f"measured_steps_{k}"])
+            meas = f"{m:.0f} measured" if math.isfinite(m) else out[f"measured_steps_{k}_reason"]
+            print(f"steps to shrink an error {k}: {float(out[f'steps_{k}']):.2f} predicted, "
+                  f"{meas}" + (" (median, transient included)" if k == "10x" else ""))
 
 
 def run_basin(args):
@@ -145,11 +174,13 @@ def run_basin(args):
         raise CLIError(f"--axes must be two of {','.join(AXIS_NAMES)}, got {args.axes!r}")
     if len(axes) != 2 or axes[0] == axes[1]:
         raise CLIError(f"--axes needs two different coordinates, got {args.axes!r}")
-    if min(args.grid) < 2 or args.steps < 1 or args.chunk < 1:
-        raise CLIError("need --grid >= 2 2, --steps >= 1, --chunk >= 1")
-    check_finite("--half-widths", *args.half_widths)
-    if min(args.half_widths) <= 0:
-        raise CLIError("--half-widths must be positive")
+    points = args.grid[0] * args.grid[1]
+    if points > MAX_GRID_POINTS:
+        raise CLIError(f"--grid {args.grid[0]} {args.grid[1]} is {points:,} points (one "
+                       f"simulation each, about {points * 100 / 1e9:.1f} GB of results in "
+                       f"memory); at most {MAX_GRID_POINTS:,}: use a coarser grid or several "
+                       "runs over smaller --half-widths")
+    check_output_file(args.png, "--png")
     model, z, _, period, zn = _gait(args)
     b = basin_slice(model, z, axes=axes, half_widths=tuple(args.half_widths),
                     shape=tuple(args.grid), num_steps=args.steps, tol=args.tol,
@@ -171,7 +202,7 @@ def run_basin(args):
     if args.png:
         from ..plotting import plot_basin
 
-        plot_basin(b, args.png)
+        plot_basin(b, args.png, case=f"gait at {describe(args)}")
     if args.json:
         print_json(out)
     else:
@@ -191,8 +222,9 @@ def run_slope(args):
 
     from ..robustness import gait_sensitivity_norm, max_floor_step, terrain_recovery
 
-    for h in args.heights_mm:
-        check_finite("--heights-mm", h)
+    check_output_file(args.png, "--png")
+    if args.png:
+        check_output_file(args.png.removesuffix(".png") + "-slope.png", "--png (-slope.png)")
     model, z, x_star, period, zn = _gait(args)
     out = {"gait": zn, "period": period}
     if not args.no_derivatives:
@@ -217,9 +249,11 @@ def run_slope(args):
         from ..plotting import plot_slope, plot_terrain
 
         full = terrain_recovery(model, x_star, hs, args.steps, 0.0, stop_when_converged=False)
-        plot_terrain(np.asarray(hs), full, period, args.png, float(g.norm))
+        plot_terrain(np.asarray(hs), full, period, args.png, float(g.norm),
+                     case=f"gait at {describe(args)}")
         if not args.no_derivatives:
-            plot_slope(s, args.png.removesuffix(".png") + "-slope.png")
+            plot_slope(s, args.png.removesuffix(".png") + "-slope.png",
+                       case=f"gait at {describe(args)}")
     if args.json:
         print_json(out)
     else:
@@ -240,8 +274,7 @@ def run_push(args):
 
     from ..robustness import max_push, push_sensitivity_autodiff, push_sensitivity_transverse
 
-    if args.phases < 1 or args.iterations < 1 or not args.max > 0 or args.duration < 0:
-        raise CLIError("need --phases >= 1, --iterations >= 1, --max > 0, --duration >= 0")
+    check_output_file(args.png, "--png")
     model, z, x_star, period, zn = _gait(args)
     phases = np.arange(args.phases) / args.phases
     angles = np.radians(np.asarray(args.directions_deg, float))
@@ -266,7 +299,8 @@ def run_push(args):
     if args.png:
         from ..plotting import plot_push
 
-        plot_push(phases, D, angles, res.largest, args.png, unit, p_max=args.max)
+        plot_push(phases, D, angles, res.largest, args.png, unit, p_max=args.max,
+                  case=f"gait at {describe(args)}")
     if args.json:
         print_json(out)
     else:

@@ -3,7 +3,10 @@
 import math
 import os
 
-from ._common import CLIError, add_model_flags, check_finite, model_from_args, print_json
+from ._common import (
+    FINITE, CLIError, add_model_flags, describe, check_output_dir, check_output_file, count,
+    model_from_args, print_json,
+)
 
 THESIS_7_5 = (0.218669, -0.323389, -1.092386, -0.377377)  # thesis (7.5), 3 degrees
 MAX_STEPS = 100_000
@@ -19,11 +22,12 @@ def register(subparsers):
         "Angles in radians (except --slope-deg), velocities in rad/s.",
     )
     add_model_flags(p)
-    p.add_argument("--x0", type=float, nargs=4, metavar=("Q1", "Q2", "DQ1", "DQ2"),
+    p.add_argument("--x0", type=FINITE, nargs=4, metavar=("Q1", "Q2", "DQ1", "DQ2"),
                    default=list(THESIS_7_5),
                    help="initial state: stance and swing leg angles (rad, from the vertical, "
                    "counter-clockwise) and their rates (rad/s); default: thesis (7.5)")
-    p.add_argument("--steps", type=int, default=20, help="number of steps (default 20)")
+    p.add_argument("--steps", type=count(1, MAX_STEPS), default=20,
+                   help=f"number of steps, 1 to {MAX_STEPS} (default 20)")
     p.add_argument("--json", action="store_true",
                    help="print one JSON object {result, steps: [{x_plus, x_minus, period, "
                    "result}, ...]} instead of a table")
@@ -82,15 +86,11 @@ def run(args):
     from .._results import result_names
 
     model = model_from_args(args)
-    check_finite("--x0", *args.x0)
-    if not 1 <= args.steps <= MAX_STEPS:
-        raise CLIError(f"--steps must be in [1, {MAX_STEPS}], got {args.steps}")
     _check_start(model, args.x0)
-    if args.plots is not None:
-        if os.path.exists(args.plots) and not os.path.isdir(args.plots):
-            raise CLIError(f"--plots {args.plots!r} exists and is not a directory")
     if args.animate is not None and not args.animate.lower().endswith(".gif"):
         raise CLIError(f"--animate needs a .gif file name, got {args.animate!r}")
+    check_output_file(args.animate, "--animate")
+    check_output_dir(args.plots, "--plots")  # created now, before the work
 
     dense = DENSE_POINTS if (args.plots or args.animate) else 0
     sim = simulate_jit(model, jnp.asarray(args.x0, float), args.steps, dense_points=dense)
@@ -99,11 +99,13 @@ def run(args):
 
     if args.plots:
         from .. import plotting as plotting
-        os.makedirs(args.plots, exist_ok=True)
         if int(sim.num_successful) > 0:
-            plotting.plot_states(sim, path=os.path.join(args.plots, "states.png"))
-            plotting.plot_phase_portrait(sim, path=os.path.join(args.plots, "phase.png"))
-            plotting.plot_step_periods(sim, path=os.path.join(args.plots, "periods.png"))
+            case = f"{describe(args)}, from x0 = {list(args.x0)}"
+            plotting.plot_states(sim, path=os.path.join(args.plots, "states.png"), case=case)
+            plotting.plot_phase_portrait(sim, path=os.path.join(args.plots, "phase.png"),
+                                         case=case)
+            plotting.plot_step_periods(sim, path=os.path.join(args.plots, "periods.png"),
+                                       case=case)
     if args.animate:
         from .. import plotting as plotting
         if int(sim.num_successful) > 0:

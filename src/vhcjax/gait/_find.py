@@ -43,6 +43,7 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
         guess = jnp.asarray(guess, dtype=float)
         gait = _search_one_jit(model, guess, family_sign(family), method, solver)
         gait = _relabel(gait, family)
+    gait = _clean_failed(gait, guess)
     if throw:
         err = gait.result != RESULTS.successful
         gait = eqx.tree_at(lambda g: g.a, gait, gait.result.error_if(gait.a, err))
@@ -169,7 +170,7 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     if B <= chunk:
         gaits = _find_chunk(model, guesses, B, _padded_size(B, mesh), sign, method, solver,
                             mesh, chord)
-        return _relabel(gaits, family)
+        return _clean_failed(_relabel(gaits, family), guesses, B)
 
     def part(x, i, j):
         if eqx.is_array(x) and jnp.ndim(x) > 0:
@@ -184,7 +185,29 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
         ),
         B, chunk, workers,
     )
-    return _relabel(gaits, family)
+    return _clean_failed(_relabel(gaits, family), guesses, B)
+
+
+def _clean_failed(gaits, guesses, B=None):
+    """Members with a non-finite guess are `bad_input`; failed members hold no NaN or inf:
+    their numbers are placeholders (0 where not finite), the code says why. `B`: batch
+    size (`None`: one gait, `guesses` one guess)."""
+    if guesses is not None and B is None:
+        gaits = eqx.tree_at(lambda g: g.result, gaits, RESULTS.where(
+            jnp.all(jnp.isfinite(guesses)), gaits.result, RESULTS.bad_input))
+    elif guesses is not None:
+        finite = jnp.broadcast_to(jnp.all(jnp.isfinite(guesses), axis=1), (B,))
+        code = jax.vmap(lambda f, r: RESULTS.where(f, r, RESULTS.bad_input))(finite, gaits.result)
+        gaits = eqx.tree_at(lambda g: g.result, gaits, code)
+    failed = gaits.result != RESULTS.successful
+
+    def clean(x):
+        if not eqx.is_inexact_array(x) or jnp.ndim(x) < failed.ndim:
+            return x
+        f = failed.reshape(failed.shape + (1,) * (x.ndim - failed.ndim))
+        return jnp.where(f & ~jnp.isfinite(x), 0.0, x)
+
+    return jax.tree_util.tree_map(clean, gaits)
 
 
 def _find_chunk(model, guesses, B, P, sign, method, solver, mesh, chord):

@@ -270,8 +270,21 @@ class Simulation(eqx.Module):
         return jnp.cumsum(self.steps.period, axis=-1)
 
 
+def _check_state_shape(model, x0):
+    """A one-line error naming the expected shape (at trace time: shapes are static)."""
+    n = model.n_dof
+    if jnp.shape(x0) != (2 * n,):
+        raise ValueError(f"x0 must be one state [q, dq] of shape ({2 * n},) for "
+                         f"{type(model).__name__} ({n} joint angles and their rates), got "
+                         f"shape {jnp.shape(x0)}; for a batch use `simulate_batch` or vmap")
+
+
 def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
     x0 = jnp.asarray(x0, dtype=float)
+    _check_state_shape(model, x0)
+    # An invalid model (negative mass, NaN gravity, negative slope, ...) takes no step:
+    # every step carries `bad_input`, whatever the dynamics would have done with it.
+    valid = model.validate() if hasattr(model, "validate") else jnp.asarray(True)
 
     def body(carry, _):
         x, alive, first_fail = carry
@@ -302,7 +315,7 @@ def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
             dense = None
         return (x_next, ok, new_fail), (out, dense)
 
-    init = (x0, jnp.asarray(True), RESULTS.successful)
+    init = (x0, valid, RESULTS.where(valid, RESULTS.successful, RESULTS.bad_input))
     with trig.polynomial():  # many walkers x many steps: vectorizable sin/cos (see `trig`)
         (_, _, first_fail), (steps, dense) = jax.lax.scan(body, init, None, length=num_steps)
     num_ok = jnp.sum(steps.result._value == RESULTS.successful._value)

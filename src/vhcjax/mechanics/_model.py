@@ -13,7 +13,9 @@ import dataclasses
 from typing import ClassVar
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
+import numpy as np
 
 from . import _lagrangian as mech
 class WalkerModel(eqx.Module):
@@ -41,6 +43,46 @@ class WalkerModel(eqx.Module):
             value = getattr(self, field.name, None)
             if isinstance(value, float) or (isinstance(value, int) and not isinstance(value, bool)):
                 object.__setattr__(self, field.name, jnp.asarray(value, dtype=float))
+
+    #: Parameters that must be positive (masses, lengths, gravity) and that must not be
+    #: negative (e.g. the slope), checked by `validate`; every float parameter must be
+    #: finite. A model names its own: the base class knows nothing of their meaning.
+    POSITIVE_FIELDS: ClassVar[tuple] = ()
+    NONNEGATIVE_FIELDS: ClassVar[tuple] = ()
+
+    def validate(self):
+        """Boolean (traceable, per batch member under `vmap`): every float parameter
+        finite, those in `POSITIVE_FIELDS` positive and those in `NONNEGATIVE_FIELDS`
+        non-negative. Simulations of an invalid model end with `RESULTS.bad_input`.
+        Subclasses may narrow the ranges further."""
+        ok = jnp.asarray(True)
+        for field in dataclasses.fields(self):
+            v = getattr(self, field.name, None)
+            if not eqx.is_inexact_array(v):
+                continue
+            ok = ok & jnp.all(jnp.isfinite(v))
+            if field.name in self.POSITIVE_FIELDS:
+                ok = ok & jnp.all(v > 0)
+            elif field.name in self.NONNEGATIVE_FIELDS:
+                ok = ok & jnp.all(v >= 0)
+        return ok
+
+    def __repr__(self):
+        """`CompassGait(m1=5, m2=5, ..., psi=0.0523599)`: the parameter values (a 0-d array
+        would print as `f64[]`)."""
+        parts = []
+        for field in dataclasses.fields(self):
+            v = getattr(self, field.name, None)
+            try:
+                a = np.asarray(v)
+                text = f"{a.item():.6g}" if a.ndim == 0 and a.dtype.kind in "fiu" else (
+                    np.array2string(a, precision=6, separator=", ") if a.dtype.kind in "fiu"
+                    else repr(v))
+            except (jax.errors.TracerArrayConversionError,
+                    jax.errors.ConcretizationTypeError):  # a tracer (inside jit/vmap)
+                text = repr(v)
+            parts.append(f"{field.name}={text}")
+        return f"{type(self).__name__}({', '.join(parts)})"
 
     @abc.abstractmethod
     def kinetic_energy(self, q, dq, base_velocity=None): ...

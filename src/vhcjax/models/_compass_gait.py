@@ -189,13 +189,15 @@ class CompassGait(WalkerModel):
         return jnp.stack([q2, q1, dq_plus[1], dq_plus[0]])
 
     def validate(self):
-        """Boolean: all parameters finite, masses and lengths positive, slope in (0, 30) deg."""
+        """Boolean: all parameters finite, masses and lengths positive, slope in (0, 30) deg
+        (and the checks of `WalkerModel.validate` for the fields subclasses add)."""
         leaves = jnp.stack(
             [jnp.asarray(v, float) for v in (self.m1, self.m2, self.mH, self.a, self.b, self.g)]
         )
         psi = jnp.asarray(self.psi, float)
         return (
-            jnp.all(jnp.isfinite(leaves))
+            super().validate()
+            & jnp.all(jnp.isfinite(leaves))
             & jnp.all(leaves > 0)
             & jnp.isfinite(psi)
             & (psi > 0)

@@ -59,6 +59,8 @@ class KneedWalker(MultiDomainModel):
 
     n_dof: ClassVar[int] = 3
     num_domains: ClassVar[int] = 2
+    POSITIVE_FIELDS: ClassVar[tuple] = ("ms", "mt", "mh", "a1", "b1", "a2", "b2", "g")
+    NONNEGATIVE_FIELDS: ClassVar[tuple] = ("psi",)
 
     @property
     def ls(self):

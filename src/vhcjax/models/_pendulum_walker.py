@@ -33,6 +33,8 @@ class PendulumWalker(CompassGait):
     mp: float | jax.Array = 0.5
     lp: float | jax.Array = 0.8
 
+    POSITIVE_FIELDS: ClassVar[tuple] = ("mp", "lp")  # besides `CompassGait.validate`
+
     n_dof: ClassVar[int] = 3
 
     def points(self, q):

@@ -10,10 +10,10 @@ from ._common import pyplot
 _STYLE = {"stable": dict(color="C0", ls="-"), "unstable": dict(color="C3", ls="--")}
 
 
-def plot_sweep(sweeps, path=None):
+def plot_sweep(sweeps, path=None, case=None):
     """Plot the gaits of `sweeps` (`{"stable": Sweep, "unstable": Sweep}`, either may be
-    missing) against slope; failed slopes are left out. Returns the figure; saved to
-    `path` if given."""
+    missing) against slope; failed slopes are left out; `case` (e.g. the model) named in
+    the title. Returns the figure; saved to `path` if given."""
     plt = pyplot()
 
     fig, axes = plt.subplots(2, 2, figsize=(9, 6.5), sharex=True)
@@ -34,7 +34,8 @@ def plot_sweep(sweeps, path=None):
     for ax in axes[1]:
         ax.set_xlabel("slope (deg)")
     axes[0, 0].legend()
-    fig.suptitle("Compass-gait periodic gaits against slope (VHC search, continuation)")
+    fig.suptitle("Compass-gait periodic gaits against slope (continuation)"
+                 + (f": {case}" if case else ""))
     fig.tight_layout()
     if path is not None:
         fig.savefig(path, dpi=120)

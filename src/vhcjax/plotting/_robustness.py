@@ -7,13 +7,26 @@ from ._common import pyplot
 
 
 
+def _save(fig, path):
+    """Save to `path` (if given) and close; return the figure either way."""
+    if path is not None:
+        fig.savefig(path)
+        pyplot().close(fig)
+    return fig
+
+
+def _case(title, case):
+    return f"{title}: {case}" if case else title
+
+
 SECTION_LABELS = (r"$q_1$ (rad)", r"$\dot q_1$ (rad/s)", r"$\dot q_2$ (rad/s)")
 SECTION_SYMBOLS = (r"$q_1$", r"$\dot q_1$", r"$\dot q_2$")
 
 
-def plot_basin(b, path, title=None):
+def plot_basin(b, path=None, title=None, case=None):
     """Basin slice coloured by steps to converge; fallers grey, other cycles red,
-    undecided white; the gait marked by a star (compare Schwab and Wisse 2001)."""
+    undecided white; the gait marked by a star (compare Schwab and Wisse 2001).
+    `case` (e.g. `"stable gait, 3 deg"`) is named in the title. Returns the figure."""
     from matplotlib.colors import ListedColormap
 
     plt = pyplot()
@@ -40,16 +53,16 @@ def plot_basin(b, path, title=None):
     ax.set_ylabel(SECTION_LABELS[iy] + " just after impact")
     other = [k for k in range(len(b.z_star)) if k not in b.axes]
     fixed = ", ".join(f"{SECTION_SYMBOLS[k]} = {b.z_star[k]:.4f}" for k in other)
-    ax.set_title(title or f"Basin of attraction, slice ({fixed}); grey: falls\n"
+    ax.set_title(title or _case("Basin of attraction", case) + f", slice ({fixed}); grey: falls\n"
                  f"converging area {b.area:.4g}, fraction {b.fraction:.3f}", fontsize=9)
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    return _save(fig, path)
 
 
-def plot_contraction(c, path):
-    """Simulated recovery errors vs step with the multiplier prediction $\\rho^k$."""
+def plot_contraction(c, path=None, case=None):
+    """Simulated recovery errors vs step with the multiplier prediction $\\rho^k$; `case`
+    named in the title. Returns the figure."""
     plt = pyplot()
     d = np.asarray(c.distance)
     k = np.arange(d.shape[1])
@@ -63,16 +76,16 @@ def plot_contraction(c, path):
                 f"{float(c.measured_rate):.4f})")
     ax.set_xlabel("step k")
     ax.set_ylabel(r"$\|x_k - x^*\|_\infty$ after impact")
-    ax.set_title(f"Contraction: error /10 in {float(c.steps_10x):.2f} steps, /100 in "
+    ax.set_title(_case("Contraction", case) + f"\nerror /10 in {float(c.steps_10x):.2f} steps, /100 in "
                  f"{float(c.steps_100x):.2f} (predicted)", fontsize=9)
     ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    return _save(fig, path)
 
 
-def plot_terrain(heights, rec, period, path, gsn=None):
-    """Step times and distance to the gait after a floor step of each height."""
+def plot_terrain(heights, rec, period, path=None, gsn=None, case=None):
+    """Step times and distance to the gait after a floor step of each height; `case`
+    named in the title. Returns the figure."""
     plt = pyplot()
     T = np.asarray(rec.step_times)
     d = np.asarray(rec.distance)
@@ -92,18 +105,18 @@ def plot_terrain(heights, rec, period, path, gsn=None):
     a1.legend(fontsize=7)
     a2.set_xlabel("step")
     a2.set_ylabel(r"$\|x_k - x^*\|_\infty$")
-    title = "Recovery from a single step up (+) / down (-)"
+    title = _case("Recovery from a single step up (+) / down (-)", case)
     if gsn is not None:
         title += f"; gait sensitivity norm {gsn:.3g} s/m"
     fig.suptitle(title, fontsize=10)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    return _save(fig, path)
 
 
-def plot_push(phases, sens, angles, largest, path, unit="N s", p_max=None):
+def plot_push(phases, sens, angles, largest, path=None, unit="N s", p_max=None, case=None):
     """Left: norm of the post-impact state's sensitivity to a unit hip impulse vs phase
-    (forward and upward). Right: largest push survived vs phase, per direction."""
+    (forward and upward). Right: largest push survived vs phase, per direction. `case`
+    named in the title. Returns the figure."""
     plt = pyplot()
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4), dpi=130)
     S = np.asarray(sens)
@@ -122,27 +135,44 @@ def plot_push(phases, sens, angles, largest, path, unit="N s", p_max=None):
     a2.set_title("Largest push after which the walker returns to the gait\n"
                  "(0 deg = forward, 90 = up, 180 = backward, 270 = down)", fontsize=9)
     a2.legend(fontsize=8)
+    fig.suptitle(_case("Hip pushes along the step", case), fontsize=10)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    return _save(fig, path)
 
 
-def plot_slope(sens, path):
-    """Bar chart of the slope derivatives (per degree) of the gait quantities."""
+def plot_slope(sens, path=None, case=None):
+    """Slope derivatives (per degree of slope) of the gait quantities, one panel per unit
+    (rad, rad/s, s, m, m/s, and the dimensionless multiplier moduli), each with a legend.
+
+    **Arguments:** `sens` (a `SlopeSensitivity`), `path` (save there and close),
+    `case` (named in the title, e.g. `"stable gait, 3 deg"`). **Returns:** the figure.
+    """
     plt = pyplot()
     deg = np.pi / 180
-    names = [r"$q_1^*$", r"$\dot q_1^*$", r"$\dot q_2^*$", "T", "L", "v", r"$|\lambda_1|$",
-             r"$|\lambda_3|$"]
-    vals = list(np.asarray(sens.dz) * deg) + [float(sens.dperiod) * deg,
-                                              float(sens.dstep_length) * deg,
-                                              float(sens.dspeed) * deg,
-                                              float(sens.dmodulus[0]) * deg,
-                                              float(sens.dmodulus[-1]) * deg]
-    fig, ax = plt.subplots(figsize=(6.4, 3.8), dpi=130)
-    ax.bar(names, vals, color=["C0"] * 3 + ["C1"] * 3 + ["C2"] * 2)
-    ax.axhline(0, color="k", lw=0.6)
-    ax.set_ylabel("derivative per degree of slope")
-    ax.set_title("Sensitivity of the gait to the slope (implicit differentiation)", fontsize=9)
+    dz = np.asarray(sens.dz) * deg
+    dmod = np.asarray(sens.dmodulus) * deg
+    panels = [
+        ("rad / deg", [(r"$q_1^*$", dz[0])]),
+        ("rad/s / deg", [(r"$\dot q_1^*$", dz[1]), (r"$\dot q_2^*$", dz[2])]),
+        ("s / deg", [("step period T", float(sens.dperiod) * deg)]),
+        ("m / deg", [("step length L", float(sens.dstep_length) * deg)]),
+        ("m/s / deg", [("speed v", float(sens.dspeed) * deg)]),
+        ("1 / deg", [(f"$|\\lambda_{i + 1}|$", v) for i, v in enumerate(dmod)]),
+    ]
+    fig, axes = plt.subplots(2, 3, figsize=(9.5, 5.4), dpi=120)
+    for ax, (unit, bars) in zip(axes.ravel(), panels):
+        for k, (name, v) in enumerate(bars):
+            ax.bar([k], [v], color=f"C{k}", label=f"{name}: {v:+.3g}")
+        ax.axhline(0, color="k", lw=0.6)
+        ax.set_xticks([])
+        ax.set_xlim(-0.8, max(len(bars), 2) - 0.2)
+        ax.set_ylabel(f"derivative ({unit})")
+        ax.legend(fontsize=7, loc="best")
+        ax.grid(alpha=0.3, axis="y")
+    fig.suptitle("Sensitivity of the gait to the slope, per degree (implicit "
+                 "differentiation)" + (f": {case}" if case else ""), fontsize=10)
     fig.tight_layout()
-    fig.savefig(path)
-    plt.close(fig)
+    if path is not None:
+        fig.savefig(path)
+        plt.close(fig)
+    return fig

@@ -13,6 +13,10 @@ from ._common import pyplot
 
 
 
+def _title(text, case):
+    return f"{text}: {case}" if case else text
+
+
 def _done(fig, path):
     if path is not None:
         fig.savefig(path, dpi=110, bbox_inches="tight")
@@ -33,13 +37,14 @@ def _step_starts(sim, k):
     return np.concatenate([[0.0], np.cumsum(T)])[:k]
 
 
-def plot_states(sim, axes=None, path=None):
+def plot_states(sim, axes=None, path=None, case=None):
     """$q$ and $\\dot q$ against time (thesis Fig 7.2): stance-leg angle and velocity in
     one colour, swing leg in another; the lines swap at each impact (relabelling), and the
     velocities jump.
 
     **Arguments:** `sim` (dense `Simulation`), `axes` (two matplotlib axes, optional),
-    `path` (save the figure there and close it).
+    `path` (save the figure there and close it), `case` (what was simulated, named in
+    the title, e.g. `"stable gait, 3 deg"`).
 
     **Returns:** the matplotlib figure.
     """
@@ -63,13 +68,14 @@ def plot_states(sim, axes=None, path=None):
     for ax in axes:
         ax.grid(alpha=0.3)
         ax.legend(loc="upper right", fontsize=8)
-    axes[0].set_title(f"States against time ({k} steps)")
+    axes[0].set_title(_title(f"States against time ({k} steps)", case), fontsize=10)
     return _done(fig, path)
 
 
-def plot_phase_portrait(sim, ax=None, path=None):
+def plot_phase_portrait(sim, ax=None, path=None, case=None):
     """Phase portrait of one physical leg (thesis Fig 7.3): $(q, \\dot q)$ while it is the
     stance leg (red) and while it is the swing leg (green); impacts are the jumps.
+    `case`: what was simulated, named in the title.
 
     **Returns:** the matplotlib figure.
     """
@@ -89,15 +95,23 @@ def plot_phase_portrait(sim, ax=None, path=None):
                     ":", color="0.5", lw=0.8)
     ax.set_xlabel("leg angle (rad)")
     ax.set_ylabel("leg angular velocity (rad/s)")
-    ax.set_title("Phase portrait of one leg")
+    ax.set_title(_title("Phase portrait of one leg", case), fontsize=10)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8)
     return _done(fig, path)
 
 
-def plot_step_periods(sim, ax=None, path=None):
-    """Time between consecutive impacts against step number (thesis Fig 7.4). Needs no
-    dense output.
+#: Smallest half-height of the step-period axis, relative to the mean period: variations
+#: below it (e.g. 5e-11 s of rounding on a periodic gait) are not magnified into a curve.
+MIN_PERIOD_SPAN = 1e-4
+
+
+def plot_step_periods(sim, ax=None, path=None, case=None):
+    """Time between consecutive impacts against step number (thesis Fig 7.4), one marker
+    per step (no connecting lines: a period-4 pattern stays visible over hundreds of
+    steps). The y-axis spans at least `MIN_PERIOD_SPAN` of the mean period either side,
+    so that rounding-level differences of a periodic gait show as a flat row. Needs no
+    dense output. `case`: what was simulated, named in the title.
 
     **Returns:** the matplotlib figure.
     """
@@ -108,12 +122,18 @@ def plot_step_periods(sim, ax=None, path=None):
         fig, ax = plt.subplots(figsize=(6, 3.5))
     else:
         fig = ax.figure
-    ax.plot(np.arange(1, k + 1), T, "o-", ms=4)
+    ax.plot(np.arange(1, k + 1), T, "o" if k <= 60 else ".", ms=4 if k <= 60 else 2.5,
+            ls="none")
+    if k:
+        mid, half = 0.5 * (T.max() + T.min()), 0.5 * (T.max() - T.min())
+        half = max(1.1 * half, MIN_PERIOD_SPAN * abs(mid))
+        ax.set_ylim(mid - half, mid + half)
     ax.set_xlabel("step number")
     ax.set_ylabel("step period (s)")
-    ax.set_title("Time between consecutive impacts")
+    ax.set_title(_title("Time between consecutive impacts", case), fontsize=10)
     ax.ticklabel_format(axis="y", useOffset=False)
     ax.grid(alpha=0.3)
+    fig.tight_layout()
     return _done(fig, path)
 
 

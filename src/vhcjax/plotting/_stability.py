@@ -47,8 +47,9 @@ def plot_multipliers_complex(sets, labels=None, path=None, title=None):
     return fig
 
 
-def plot_multipliers_vs_slope(slopes_deg, families, path=None):
-    """Moduli of the multipliers against slope.
+def plot_multipliers_vs_slope(slopes_deg, families, path=None, case=None):
+    """Moduli of the multipliers against slope; `case` (e.g. the method and model) named
+    in the title.
 
     `families`: dict name -> complex array (B, 2n-1) of multipliers at `slopes_deg`.
     """
@@ -65,7 +66,8 @@ def plot_multipliers_vs_slope(slopes_deg, families, path=None):
     ax.set_yscale("log")
     ax.set_xlabel("slope (deg)")
     ax.set_ylabel("|multiplier|")
-    ax.set_title("Multipliers of the period-1 gaits (transverse linearization)")
+    ax.set_title("Multipliers of the period-1 gaits" + (f": {case}" if case else ""),
+                 fontsize=10)
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     if path:
@@ -88,13 +90,14 @@ def _branch(ax, x, y, stable, color, label):
         first[s] = False
 
 
-def plot_bifurcation(diagram, branches=(), path=None, flips_deg=()):
+def plot_bifurcation(diagram, branches=(), path=None, flips_deg=(), case=None):
     """Bifurcation diagram: step periods of the last recorded steps against slope.
 
     - `diagram`: a `BifurcationDiagram`.
     - `branches`: tuples `(label, slopes_deg, periods (B,) or (B, k), stable (B,))`
       overlaid (solid stable, dashed unstable).
     - `flips_deg`: slopes of period doubling, marked by thin vertical lines.
+    - `case`: named in the title (e.g. the model).
     """
     plt = pyplot()
     fig, ax = plt.subplots(figsize=(8, 5))
@@ -118,7 +121,8 @@ def plot_bifurcation(diagram, branches=(), path=None, flips_deg=()):
         ax.axvline(f, color="0.6", lw=0.6, ls=":")
     ax.set_xlabel("slope (deg)")
     ax.set_ylabel("step period (s)")
-    ax.set_title("Compass gait: step periods after transients (Goswami et al. 1998)")
+    ax.set_title("Compass gait: step periods after transients (Goswami et al. 1998)"
+                 + (f"\n{case}" if case else ""), fontsize=10)
     handles, labels = ax.get_legend_handles_labels()
     keep = [(h, lab) for h, lab in zip(handles, labels) if not lab.startswith("_")]
     ax.legend([h for h, _ in keep], [lab for _, lab in keep], fontsize=8, loc="upper left")

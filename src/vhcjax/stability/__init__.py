@@ -4,6 +4,7 @@ Jacobian, period doubling, period-k orbits, bifurcation diagrams.
 
 from ._multipliers import (
     add_stability_columns as add_stability_columns,
+    AGREEMENT_RTOL as AGREEMENT_RTOL,
     bifurcation_diagram as bifurcation_diagram,
     BifurcationDiagram as BifurcationDiagram,
     CSV_COLUMNS as CSV_COLUMNS,
@@ -14,6 +15,7 @@ from ._multipliers import (
     finite_difference_jacobian_jit as finite_difference_jacobian_jit,
     gait_multipliers as gait_multipliers,
     gait_multipliers_jit as gait_multipliers_jit,
+    MAX_CONDITION as MAX_CONDITION,
     GaitMultipliers as GaitMultipliers,
     midswing_map as midswing_map,
     midswing_multipliers as midswing_multipliers,
@@ -29,6 +31,7 @@ from ._multipliers import (
     stability_csv_row as stability_csv_row,
     stability_json as stability_json,
     to_midswing as to_midswing,
+    transverse_note as transverse_note,
     with_slope as with_slope,
 )
 

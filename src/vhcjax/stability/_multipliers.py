@@ -26,7 +26,7 @@ import optimistix as optx
 
 from ..models import CompassGait
 from ..hybrid import solve_to_event
-from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, ode_solver, step_unchecked, simulate
+from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, flow, ode_solver, step_unchecked, simulate
 from .. import hybrid as _poincare
 from ..hybrid import fixed_point, jacobian, step_map
 from .._results import RESULTS
@@ -52,14 +52,29 @@ def _sort(ev):
 
 # ---- multipliers of one gait, two ways --------------------------------------------------
 class GaitMultipliers(eqx.Module):
-    """Multipliers of a period-1 gait.
+    """Multipliers of a period-1 gait, by two methods, with a check of each.
 
     - `transverse`: eigenvalues of $\\Xi$ (thesis 6.42), complex (2n-1,), by modulus.
+      Trust them only where `transverse_result` is `successful`.
     - `poincare`: eigenvalues of the Poincare-map Jacobian (jacfwd through the events).
-    - `max_abs`: the largest modulus (transverse linearization).
+    - `max_abs`: the largest modulus of the Poincare multipliers (the method whose
+      assumptions hold for every gait the hybrid simulator completes; where the
+      transverse linearization holds the two agree to 1e-6).
     - `stable`: `max_abs < 1`.
     - `period`, `x_minus`: from the hybrid step.
-    - `result`: `successful` or the first failure of the step / the linearization.
+    - `result`: `successful`, or the failure of the hybrid step, or `nonfinite` where
+      the Poincare Jacobian is not finite.
+    - `transverse_result`: `successful`, or why the transverse multipliers are not to be
+      trusted: the failure of its integration (`no_impact`, `max_steps_reached`,
+      `nonfinite`), `phase_not_monotone` ($\\dot q_1$ changes sign along the orbit:
+      thesis ch. 6 needs a monotone phase), `ill_conditioned` (condition number of
+      $[L; m^T]$ above `MAX_CONDITION`, or the flow nearly tangent to the impact
+      surfaces), `methods_disagree` (the construction does not reproduce the orbit of the
+      hybrid step, or its multipliers differ from the Poincare ones by more than
+      `AGREEMENT_RTOL` relative to the spectral radius).
+    - `disagreement`: that relative difference (symmetric nearest-eigenvalue distance
+      over the Poincare spectral radius).
+    - `condition`: the larger condition number of $[L; m^T]$ at the two ends.
     - `linearization`: the full `TransverseLinearization` (Xi, Phi(T), dF, ...).
     """
 
@@ -70,19 +85,83 @@ class GaitMultipliers(eqx.Module):
     period: jax.Array
     x_minus: jax.Array
     result: RESULTS
+    transverse_result: RESULTS
+    disagreement: jax.Array
+    condition: jax.Array
     linearization: TransverseLinearization
 
 
+#: Relative difference above which the two multiplier computations disagree.
+AGREEMENT_RTOL = 1e-6
+#: Condition number of $[L; m^T]$ (transverse coordinates) above which they are not used.
+MAX_CONDITION = 1e8
+#: Samples of $\\dot q_1$ along the step for the monotone-phase check.
+PHASE_SAMPLES = 65
+
+
+def _spectral_distance(a, b):
+    """Symmetric nearest-eigenvalue distance between spectra `a` and `b` over the spectral
+    radius of `b` (0 where they are the same set)."""
+    d = jnp.abs(a[:, None] - b[None, :])
+    dist = jnp.maximum(jnp.max(jnp.min(d, axis=1)), jnp.max(jnp.min(d, axis=0)))
+    return dist / jnp.maximum(jnp.max(jnp.abs(b)), jnp.finfo(b.real.dtype).tiny)
+
+
+def _phase_monotone(model, x0, period, config):
+    """Whether $\\dot q_1$ keeps the sign it has at the start, at `PHASE_SAMPLES` times of
+    the step (with a margin of 1e-6 of its largest modulus)."""
+    ts = jnp.linspace(0.0, 1.0, PHASE_SAMPLES) * period
+    sol = flow(model, x0, period * (1 + 1e-12) + 1e-12, config, saveat=diffrax.SaveAt(ts=ts),
+               event=False)
+    dq1 = sol.ys[:, model.n_dof]
+    s = jnp.sign(dq1[0])
+    return jnp.all(s * dq1 > 1e-6 * jnp.max(jnp.abs(dq1))) & jnp.all(jnp.isfinite(dq1))
+
+
+def _transverse_checks(model, x0, sr, tl, pm, config):
+    """`transverse_result`, `disagreement`, `condition` (see `GaitMultipliers`)."""
+    condition = tl.condition
+    ill = (condition > MAX_CONDITION) | (tl.transversality < 1e-8)
+    scale = jnp.maximum(jnp.max(jnp.abs(sr.x_minus)), 1.0)
+    orbit_off = (jnp.max(jnp.abs(tl.x_minus - sr.x_minus)) > AGREEMENT_RTOL * scale) | (
+        jnp.abs(tl.period - sr.period) > AGREEMENT_RTOL * jnp.abs(sr.period))
+    disagreement = _spectral_distance(tl.multipliers, pm)
+    disagreement = jnp.where(jnp.isfinite(disagreement), disagreement, jnp.inf)
+    monotone = _phase_monotone(model, x0, sr.period, config)
+    # The cause first: with a non-monotone phase the construction's own integration
+    # usually fails too (phi' = dq2/dq1 blows up where dq1 = 0).
+    code = RESULTS.where(monotone, tl.result, RESULTS.phase_not_monotone)
+    for bad, c in ((ill, RESULTS.ill_conditioned),
+                   (orbit_off | (disagreement > AGREEMENT_RTOL), RESULTS.methods_disagree)):
+        code = RESULTS.where((code == RESULTS.successful) & bad, c, code)
+    return code, disagreement, condition
+
+
 def _gait_multipliers(model, z, config=DEFAULT_CONFIG):
-    """Both multiplier computations at the period-1 gait with section coordinates `z`."""
+    """Both multiplier computations at the period-1 gait with section coordinates `z`,
+    with the checks of the transverse one."""
     z = jnp.asarray(z, float)
     x0 = model.section_to_state(z)
     sr = step_unchecked(model, x0, config)
     tl = transverse_linearization(model, x0, sr.x_minus, sr.period)
     pm = _sort(jnp.linalg.eigvals(jacobian(model, z, 1, config)))
-    code = RESULTS.where(sr.result == RESULTS.successful, tl.result, sr.result)
-    mx = jnp.max(jnp.abs(tl.multipliers))
-    return GaitMultipliers(tl.multipliers, pm, mx, mx < 1.0, sr.period, sr.x_minus, code, tl)
+    code = RESULTS.where(sr.result == RESULTS.successful,
+                         RESULTS.where(jnp.all(jnp.isfinite(pm)), RESULTS.successful,
+                                       RESULTS.nonfinite), sr.result)
+    tcode, disagreement, condition = _transverse_checks(model, x0, sr, tl, pm, config)
+    tcode = RESULTS.where(code == RESULTS.successful, tcode, code)
+    ok = code == RESULTS.successful
+    pm = jnp.where(ok, pm, 0.0)
+    mx = jnp.max(jnp.abs(pm))
+    # No NaN or inf in a result: where the construction broke down its matrices are
+    # placeholders (0 where not finite); `transverse_result` says why.
+    broke = tcode != RESULTS.successful
+    tl = jax.tree_util.tree_map(
+        lambda x: jnp.where(broke & ~jnp.isfinite(x), 0.0, x) if eqx.is_inexact_array(x) else x,
+        tl)
+    tr = tl.multipliers
+    return GaitMultipliers(tr, pm, mx, ok & (mx < 1.0), sr.period, sr.x_minus, code, tcode,
+                           disagreement, condition, tl)
 
 
 @eqx.filter_jit
@@ -265,6 +344,10 @@ def period1_family(psis, family="stable", *, model=None, seed=None, seed_psi=mat
                 break
             zs.append(np.asarray(fp.z))
             known[float(p)] = zs[-1]
+    if not known:  # no gait at the seed (e.g. another model): every slope fails, cleanly
+        n = len(psis)
+        return Family(jnp.asarray(psis), jnp.broadcast_to(jnp.asarray(z_seed), (n, len(z_seed))),
+                      jnp.zeros(n), jax.vmap(lambda _: RESULTS.not_converged)(jnp.arange(n)))
     ps = np.array(sorted(known))
     Z = np.stack([known[p] for p in ps])
     guesses = np.stack([np.interp(psis, ps, Z[:, j]) for j in range(Z.shape[1])], axis=1)
@@ -551,30 +634,68 @@ def period2_branch(model, pd, psis, config=DEFAULT_CONFIG, amplitudes=(3e-3, 1e-
 
 # ---- output helpers for the `gait` command (JSON fields and sweep CSV columns) -----------
 CSV_COLUMNS = ["mult1_re", "mult1_im", "mult2_re", "mult2_im", "mult3_re", "mult3_im",
-               "max_abs_multiplier", "stable"]
+               "max_abs_multiplier", "stable", "transverse_result"]
+
+
+def _pick(x, index):
+    x = np.asarray(x)
+    return x if index is None else x[index]
+
+
+def transverse_note(gm, index=None):
+    """`None` where the transverse multipliers of a (possibly batched, then `index`)
+    `GaitMultipliers` hold; else a one-line reason they are not to be trusted."""
+    from .._results import result_names
+
+    name = result_names(_pick(gm.transverse_result._value, index))
+    if name == "successful":
+        return None
+    msg = f"transverse linearization not used ({name}): {RESULTS[getattr(RESULTS, name)]}"
+    dis = float(_pick(gm.disagreement, index))
+    if name == "methods_disagree" and math.isfinite(dis):
+        msg += f" Relative difference {dis:.3g}."
+    return msg
 
 
 def stability_json(gm, index=None):
-    """JSON fields `multipliers` (transverse linearization), `multipliers_poincare` (each
-    a list of `[re, im]`) and `stable` from a (possibly batched, then `index`)
-    `GaitMultipliers`."""
-    tr, pc, st = np.asarray(gm.transverse), np.asarray(gm.poincare), np.asarray(gm.stable)
-    if index is not None:
-        tr, pc, st = tr[index], pc[index], st[index]
-    return {"multipliers": [[float(e.real), float(e.imag)] for e in tr],
-            "multipliers_poincare": [[float(e.real), float(e.imag)] for e in pc],
-            "stable": bool(st)}
+    """JSON fields from a (possibly batched, then `index`) `GaitMultipliers`:
+    `multipliers` (transverse linearization, a list of `[re, im]`, or `null` where its
+    assumptions fail, with `multipliers_reason`), `multipliers_poincare`,
+    `max_abs_multiplier` and `stable` (from the Poincare multipliers, see
+    `GaitMultipliers`), `stability_method`, `transverse_result` and
+    `transverse_disagreement` (relative, `null` if not finite)."""
+    from .._results import result_names
+
+    tr, pc = _pick(gm.transverse, index), _pick(gm.poincare, index)
+    note = transverse_note(gm, index)
+    dis = float(_pick(gm.disagreement, index))
+    out = {"multipliers": None if note else [[float(e.real), float(e.imag)] for e in tr]}
+    if note:
+        out["multipliers_reason"] = note
+    out.update({
+        "multipliers_poincare": [[float(e.real), float(e.imag)] for e in pc],
+        "max_abs_multiplier": float(_pick(gm.max_abs, index)),
+        "stable": bool(_pick(gm.stable, index)),
+        "stability_method": "poincare_jacobian",
+        "transverse_result": result_names(_pick(gm.transverse_result._value, index)),
+        "transverse_disagreement": dis if math.isfinite(dis) else None,
+    })
+    return out
 
 
 def stability_csv_row(gm, index=None):
-    """Values for `CSV_COLUMNS` (transverse multipliers, by modulus, descending)."""
-    tr = np.asarray(gm.transverse)
-    tr = tr if index is None else tr[index]
+    """Values for `CSV_COLUMNS`: the transverse multipliers by modulus (empty where
+    `transverse_result` is not `successful`), the largest Poincare modulus, the verdict
+    from it, and `transverse_result`."""
+    from .._results import result_names
+
+    tr = _pick(gm.transverse, index)
+    trusted = transverse_note(gm, index) is None
     row = []
     for e in tr:
-        row += [float(e.real), float(e.imag)]
-    mx = float(np.max(np.abs(tr)))
-    return row + [mx, bool(mx < 1.0)]
+        row += [float(e.real), float(e.imag)] if trusted else ["", ""]
+    return row + [float(_pick(gm.max_abs, index)), bool(_pick(gm.stable, index)),
+                  result_names(_pick(gm.transverse_result._value, index))]
 
 
 def add_stability_columns(model, gaits, psis, rows):

@@ -185,6 +185,11 @@ class TransverseLinearization(eqx.Module):
       $\\delta x^+ \\mapsto \\zeta^+$).
     - `x_minus`: $x_\\star^-$ at the end of the integrated orbit; `period`: the time
       $T$ at which $\\theta_\\star$ reaches $\\theta^-$.
+    - `condition`: the larger condition number of $[L; m^T]$ at $x^-$ and $x^+$ (the
+      change to transverse coordinates; large where they degenerate; 1/eps where singular).
+    - `transversality`: the smaller $|m^T n| / (|m| |n|)$ at the two impact surfaces
+      (near 0 where the flow is tangent to them and the projections (6.35), (6.36) blow
+      up).
     - `result`: `successful` or a failure code (`max_steps_reached`, `no_impact`,
       `nonfinite`).
     """
@@ -198,7 +203,13 @@ class TransverseLinearization(eqx.Module):
     P_plus: jax.Array
     x_minus: jax.Array
     period: jax.Array
+    condition: jax.Array
+    transversality: jax.Array
     result: RESULTS
+
+
+def _cosine(m, normal):
+    return jnp.abs(jnp.dot(m, normal)) / (jnp.linalg.norm(m) * jnp.linalg.norm(normal))
 
 
 def _split(model, u):
@@ -303,4 +314,11 @@ def transverse_linearization(model, x_plus, x_minus, period, *, rtol=1e-11, atol
     ev = ev[jnp.argsort(-jnp.abs(ev))]
     finite = jnp.all(jnp.isfinite(Xi))
     code = RESULTS.where((code == RESULTS.successful) & ~finite, RESULTS.nonfinite, code)
-    return TransverseLinearization(Xi, ev, Phi_T, dF, dF_TS, P_minus, P_plus, xm, T, code)
+    Lp = jnp.concatenate([L_plus, m_plus[None]], axis=0)
+    condition = jnp.maximum(jnp.linalg.cond(Lm), jnp.linalg.cond(Lp))
+    # numerically singular: 1/eps (finite, so that no result holds inf)
+    condition = jnp.where(jnp.isfinite(condition), condition, 1 / jnp.finfo(Lm.dtype).eps)
+    transversality = jnp.minimum(_cosine(m_minus, n_minus), _cosine(m_plus, n_plus))
+    transversality = jnp.where(jnp.isfinite(transversality), transversality, 0.0)
+    return TransverseLinearization(Xi, ev, Phi_T, dF, dF_TS, P_minus, P_plus, xm, T,
+                                   condition, transversality, code)

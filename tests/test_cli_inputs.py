@@ -1,0 +1,199 @@
+"""Every numeric flag of every command is checked before any work (issue 21): NaN, inf,
+negative, zero and out-of-range values give one line on stderr and exit status 2; output
+paths that cannot be written are refused before the work; Ctrl-C ends a run at once.
+
+The flags are read from the parser itself, so that a new numeric flag without a check
+fails `test_every_numeric_flag_is_checked`. All but the Ctrl-C test run in-process and
+stop before JAX is used (they take milliseconds).
+"""
+
+import argparse
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from vhcjax._json import to_jsonable
+from vhcjax.cli import build_parser, main
+from vhcjax.cli._common import Parser, parse_range
+
+#: Arguments each command needs besides the flag under test.
+REQUIRED = {"sweep": ["--slope-deg", "2:3:0.5"], "bifurcation": ["--slope-deg", "2:3:0.5"],
+            "reproduce": ["--out", "/tmp/vhcjax-never-written"]}
+#: Checked after parsing by `model_from_args` (messages "--mass-hip must be positive").
+MODEL_FLAGS = {"--slope-deg", "--mass-hip", "--mass-leg", "--a", "--b", "--gravity"}
+
+
+def _subparsers():
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return sub.choices
+
+
+def _numeric_actions():
+    for name, p in _subparsers().items():
+        for a in p._actions:
+            if a.option_strings and a.type is not None and a.type not in (str,):
+                yield name, a
+
+
+def _bad_values(action):
+    """NaN, infinities, and the values just outside the flag's range."""
+    flag = action.option_strings[0]
+    if flag in MODEL_FLAGS:
+        return ["nan", "inf", "-inf", "-1", "0"]
+    kind, lo, hi, lo_open, hi_open = action.type.bounds
+    out = ["nan", "inf", "-inf"] if kind is float else ["nan", "1.5", "x"]
+    if lo is not None:
+        out.append(str(lo) if lo_open else str(lo - 1))
+        if lo > 0:
+            out.append("-1")
+    if hi is not None:
+        out.append(str(hi) if hi_open else str(hi + 1 if kind is int else hi * 2 + 1))
+    return out
+
+
+CASES = [(cmd, a.option_strings[0], a.nargs, v) for cmd, a in _numeric_actions()
+         for v in _bad_values(a)]
+
+
+def test_every_numeric_flag_is_checked():
+    """A numeric flag is either a model flag (checked by `model_from_args`) or parsed by a
+    range-checking `number` type; plain `float`/`int` would let NaN through."""
+    seen = set()
+    for cmd, a in _numeric_actions():
+        flag = a.option_strings[0]
+        seen.add(cmd)
+        if flag in MODEL_FLAGS:
+            assert a.type is float, (cmd, flag)
+        else:
+            assert hasattr(a.type, "bounds"), f"{cmd} {flag} has an unchecked type {a.type}"
+    assert seen == set(_subparsers()) - {"reproduce"}
+    assert len(CASES) > 150
+
+
+@pytest.mark.parametrize("cmd, flag, nargs, value", CASES,
+                         ids=[f"{c} {f} {v}" for c, f, _, v in CASES])
+def test_bad_numeric_value_one_line_exit_2(capsys, cmd, flag, nargs, value):
+    n = nargs if isinstance(nargs, int) else 1
+    t0 = time.perf_counter()
+    code = main([cmd, *REQUIRED.get(cmd, []), flag, *([value] * n)])
+    err = capsys.readouterr().err
+    assert code == 2, err
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"vhcjax {cmd}: error:"), err
+    assert flag in lines[0] and "Traceback" not in err
+    assert time.perf_counter() - t0 < 5.0  # refused before any compilation
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["basin", "--grid", "20000", "20000"], "at most 4,000,000"),
+    (["contraction", "--perturbations", "100000", "--steps", "100000"], "at most 50,000,000"),
+    (["sweep", "--slope-deg", "1:nan:0.5"], "finite"),
+    (["sweep", "--slope-deg", "1:2:0"], "STEP > 0"),
+    (["sweep", "--slope-deg", "1:1e9:1e-3"], "at most 100000"),
+    (["bifurcation", "--slope-deg", "29:31:1"], "(0, 30)"),
+    (["basin", "--axes", "q1,q1"], "two different"),
+    (["simulate", "--animate", "walk.mp4"], ".gif"),
+])
+def test_other_refusals(capsys, argv, message):
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err
+
+
+def test_range_never_passes_stop():
+    assert parse_range("1:2:0.4") == pytest.approx([1.0, 1.4, 1.8])
+    assert parse_range("1:2:0.5") == pytest.approx([1.0, 1.5, 2.0])
+    assert parse_range("0.1:0.3:0.1")[-1] == pytest.approx(0.3)
+    assert len(parse_range("0.5:6:0.1")) == 56
+
+
+def test_negative_scientific_notation_is_a_number():
+    args = build_parser().parse_args(["simulate", "--x0", "0.2", "-0.3", "-1e6", "1e6"])
+    assert args.x0 == [0.2, -0.3, -1e6, 1e6]
+    args = build_parser().parse_args(["slope-sensitivity", "--heights-mm", "-1.5e1", "-2E0"])
+    assert args.heights_mm == [-15.0, -2.0]
+    assert Parser()._negative_number_matcher.match("-inf")  # then refused as not finite
+
+
+def _unwritable_cases(tmp_path):
+    missing = str(tmp_path / "missing" / "out")
+    folder = str(tmp_path)  # an existing directory where a file is expected
+    cases = []
+    for cmd, flag, ext in [("sweep", "--csv", "csv"), ("sweep", "--png", "png"),
+                           ("bifurcation", "--csv", "csv"), ("bifurcation", "--png", "png"),
+                           ("bifurcation", "--png-multipliers", "png"),
+                           ("multipliers", "--png", "png"), ("contraction", "--png", "png"),
+                           ("basin", "--png", "png"), ("slope-sensitivity", "--png", "png"),
+                           ("push", "--png", "png"), ("simulate", "--animate", "gif")]:
+        for path in (f"{missing}.{ext}", f"/proc/vhcjax-test.{ext}", folder):
+            if flag == "--animate" and path == folder:
+                continue  # refused for its suffix (tested above)
+            cases.append([cmd, *REQUIRED.get(cmd, []), flag, path])
+    for cmd, flag in [("simulate", "--plots"), ("reproduce", "--out")]:
+        for path in ("/proc/vhcjax-test", str(tmp_path / "file")):
+            cases.append([cmd, flag, path])
+    (tmp_path / "file").write_text("not a directory")
+    return cases
+
+
+def test_unwritable_outputs_refused_before_work(tmp_path, capsys):
+    before = set(os.listdir(tmp_path))
+    for argv in _unwritable_cases(tmp_path):
+        t0 = time.perf_counter()
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert "\n" not in err and argv[-2] in err, (argv, err)
+        assert time.perf_counter() - t0 < 5.0, argv
+    assert set(os.listdir(tmp_path)) == before | {"file"}  # nothing left behind
+
+
+def test_json_never_holds_nan():
+    import numpy as np
+
+    nulls = []
+    out = to_jsonable({"a": float("nan"), "b": np.array([1.0, np.inf]),
+                       "c": [np.float64(-np.inf), 2], "d": np.array([1 + 1j, np.nan])}, nulls)
+    text = json.dumps(out, allow_nan=False)
+    assert "NaN" not in text and "Infinity" not in text
+    assert out["b"] == [1.0, None] and out["c"] == [None, 2]
+    assert nulls == ["a", "b[1]", "c[0]", "d[1][0]"]
+
+
+def test_print_json_nulls_have_a_reason(capsys):
+    from vhcjax.cli import print_json
+
+    print_json({"a": float("nan"), "a_reason": "no recovery shrank 100x", "b": [1.0, np.inf]})
+    out = json.loads(capsys.readouterr().out)
+    assert out["a"] is None and out["b"] == [1.0, None]
+    assert set(out["null_fields"]) == {"b[1]"}  # "a" is explained by "a_reason"
+
+
+def test_ctrl_c_stops_reproduce_at_once(tmp_path):
+    """SIGINT to `vhcjax reproduce --quick` a few seconds in: exit 130 within seconds, one
+    line on stderr, and no report that looks complete."""
+    env = dict(os.environ)
+    src = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
+    env["PYTHONPATH"] = src + os.pathsep + env.get("PYTHONPATH", "")
+    out = tmp_path / "out"
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "import sys; from vhcjax.cli import main; sys.exit(main())",
+         "reproduce", "--quick", "--quiet", "--out", str(out)],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    time.sleep(6.0)
+    assert proc.poll() is None, proc.communicate()
+    t0 = time.perf_counter()
+    proc.send_signal(signal.SIGINT)
+    _, stderr = proc.communicate(timeout=30)
+    assert time.perf_counter() - t0 < 5.0
+    assert proc.returncode == 130, stderr
+    assert stderr.strip().splitlines() == ["vhcjax reproduce: interrupted"], stderr
+    left = os.listdir(out) if out.exists() else []
+    assert "report.md" not in left and "results.json" not in left
+    assert not [f for f in left if f.endswith(".partial")]
