@@ -143,7 +143,7 @@ def add_model_choice(parser):
                         "parameters; --mass-hip defaults to 0.5 kg for it) (default %(default)s)")
     g = parser.add_argument_group("kneed walker (with --model kneed)")
     for dest, flag, _, text in KNEED_FLAGS:
-        g.add_argument(flag, dest=dest, type=float, default=None, help=text)
+        g.add_argument(flag, dest=dest, type=POSITIVE, default=None, help=text)
 
 
 def kneed_from_args(args, slope_deg):

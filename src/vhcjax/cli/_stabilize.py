@@ -2,7 +2,7 @@
 
 import math
 
-from ._common import CLIError, add_model_flags, check_finite, model_from_args, print_json
+from ._common import POSITIVE, CLIError, count, number, add_model_flags, check_finite, model_from_args, print_json
 
 FAMILIES = ("unstable", "stable")
 
@@ -24,16 +24,16 @@ def register(subparsers):
     p.add_argument("--q", default="1,1,1", metavar="Q1,Q2,Q3",
                    help="diagonal LQR weights on (delta q2, delta dq1, delta dq2) per second, "
                    ">= 0 (default 1,1,1); also the jump weight")
-    p.add_argument("--r", type=float, default=1.0, help="LQR weight on the torque, > 0")
-    p.add_argument("--torque-limit", type=float, default=None, metavar="NM",
+    p.add_argument("--r", type=POSITIVE, default=1.0, help="LQR weight on the torque, > 0")
+    p.add_argument("--torque-limit", type=POSITIVE, default=None, metavar="NM",
                    help="saturation of the hip torque in N m, > 0 (default: none)")
-    p.add_argument("--perturbation", type=float, default=1e-2, metavar="D",
+    p.add_argument("--perturbation", type=number(float, lo=0.0, hi=1.0), default=1e-2, metavar="D",
                    help="added to every post-impact section coordinate for the simulation "
                    "(rad, rad/s; default 0.01)")
-    p.add_argument("--steps", type=int, default=30, help="simulated steps (default 30)")
+    p.add_argument("--steps", type=count(1, 10_000), default=30, help="simulated steps (default 30)")
     p.add_argument("--basin", action="store_true",
                    help="basin slices over (q1, dq1) with and without feedback")
-    p.add_argument("--basin-grid", type=int, default=15, help="basin grid points per axis")
+    p.add_argument("--basin-grid", type=count(2, 400), default=15, help="basin grid points per axis")
     p.add_argument("--json", action="store_true", help="print the results as one JSON object")
     p.add_argument("--png", metavar="FILE",
                    help="save gains vs phase, recovery, basin with and without feedback")
