@@ -37,6 +37,7 @@ import contextvars
 
 import jax
 import jax.numpy as jnp
+from jax.core import ShapedArray
 from jax.extend.core import Primitive
 from jax.interpreters import ad, batching, mlir
 
@@ -135,7 +136,7 @@ sin_cos_p = Primitive("vhcjax_sin_cos")
 sin_cos_p.multiple_results = True
 _IMPLS = {True: jax.jit(_sin_cos_poly), False: jax.jit(_sin_cos_libm)}
 sin_cos_p.def_impl(lambda x, *, polynomial: _IMPLS[polynomial](x))  # eager == jitted
-sin_cos_p.def_abstract_eval(lambda x, **_: (jax.core.ShapedArray(x.shape, x.dtype),) * 2)
+sin_cos_p.def_abstract_eval(lambda x, **_: (ShapedArray(x.shape, x.dtype),) * 2)
 mlir.register_lowering(
     sin_cos_p, lambda ctx, x, *, polynomial: _LOWERINGS[polynomial](ctx, x)
 )
@@ -145,7 +146,7 @@ def _sin_cos_jvp(primals, tangents, *, polynomial):
     (x,), (dx,) = primals, tangents
     s, c = sin_cos_p.bind(x, polynomial=polynomial)
     if type(dx) is ad.Zero:
-        zero = ad.Zero.from_primal_value(s)
+        zero = ad.Zero(jax.typeof(s).to_tangent_aval())
         return (s, c), (zero, zero)
     return (s, c), (c * dx, -s * dx)
 
