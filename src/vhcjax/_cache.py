@@ -67,7 +67,7 @@ def enable_compilation_cache(directory=None):
 def enable_default_cache():
     """On import: turn the cache on unless it is off or JAX already has a directory. An
     unwritable default location leaves it off (the library still works, compiling anew)."""
-    if jax.config.jax_compilation_cache_dir:
+    if jax.config.values["jax_compilation_cache_dir"]:
         return None
     try:
         return enable_compilation_cache()

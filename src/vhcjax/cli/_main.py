@@ -45,7 +45,7 @@ def _first_run_note():
     """Say so when the compilation cache is empty: the first run compiles the programs."""
     import jax
 
-    directory = jax.config.jax_compilation_cache_dir
+    directory = jax.config.values["jax_compilation_cache_dir"]
     if directory and (not os.path.isdir(directory) or not os.listdir(directory)):
         print(f"vhcjax: compiling (first run only; later runs load the programs from "
               f"{directory})", file=sys.stderr)
