@@ -58,7 +58,7 @@ class WalkerModel(eqx.Module):
         ok = jnp.asarray(True)
         for field in dataclasses.fields(self):
             v = getattr(self, field.name, None)
-            if not eqx.is_inexact_array(v):
+            if v is None or not eqx.is_inexact_array(v):
                 continue
             ok = ok & jnp.all(jnp.isfinite(v))
             if field.name in self.POSITIVE_FIELDS:
@@ -97,7 +97,7 @@ class WalkerModel(eqx.Module):
     def guard(self, q): ...
 
     @abc.abstractmethod
-    def relabel(self, q, dq): ...
+    def relabel(self, q, dq) -> tuple[jax.Array, jax.Array]: ...
 
     def strike_gate(self, q):
         """Optional: a function crossing zero *upward* when a heel strike becomes possible
@@ -117,7 +117,7 @@ class WalkerModel(eqx.Module):
 
     @property
     @abc.abstractmethod
-    def slope_normal(self): ...
+    def slope_normal(self) -> jax.Array: ...
 
     @property
     @abc.abstractmethod

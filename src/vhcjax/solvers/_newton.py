@@ -124,6 +124,7 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
     def trial_tolerance(R, first):
         if tolerances is None:
             return tol0
+        assert loose is not None  # set with `tolerances`
         return jnp.where(first, loose, jnp.clip(_TOL_FACTOR * norm(R) ** 2, final, loose))
 
     def solve(A, b):
@@ -167,7 +168,10 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
             small = ~first & (norm(dX) < atol + rtol * norm(X))
             # The Newton step from the trial point estimates its error (to first order).
             close = (norm(solve(J_t, R_t)) < size) & (norm(R_t) < residual_cap)
-            exact = True if tolerances is None else tol <= final
+            exact = True
+            if tolerances is not None:
+                assert final is not None  # set with `tolerances`
+                exact = tol <= final
             done_new = improved & exact & (small | close | (norm(R_t) < atol))
             chord_new = chord
             if chord_below is not None:
@@ -251,4 +255,4 @@ def optax_minimise(residual, x0, max_steps=1000, tol=1e-22):
 
     init = (x0, opt.init(x0), jnp.array(0), jnp.array(jnp.inf))
     x, _, k, _ = jax.lax.while_loop(cond, body, init)
-    return x, k
+    return jnp.asarray(x), k  # an array like `x0` (optax types its updates as any pytree)
