@@ -55,6 +55,7 @@ def closed_loop_multipliers_transverse(model, system, feedback, *, rtol=1e-12, a
         diffrax.ODETerm(field), diffrax.Tsit5(), t0=0.0, t1=1.0, dt0=None, y0=y0,
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
         max_steps=max_steps, throw=False)
+    assert sol.ys is not None  # saved at t1
     return _sort(jnp.linalg.eigvals(system.J @ sol.ys[-1, r:].reshape(r, r)))
 
 
@@ -105,7 +106,7 @@ class Stabilization(eqx.Module):
     result: RESULTS
 
 
-def stabilize(model, z, Q=None, R=None, Q_jump=None, *, torque_limit=jnp.inf,
+def stabilize(model, z, Q=None, R=None, Q_jump=None, *, torque_limit: float | jax.Array = jnp.inf,
               num_points=401, config=TIGHT_CONFIG):
     """Stabilize the period-1 gait with post-impact section coordinates `z` by
     transverse-linearization feedback (Shiriaev et al. 2008; Freidovich, Shiriaev and
@@ -205,6 +206,7 @@ def closed_loop_push_step(model, feedback, x0, t_push, impulse, config=DEFAULT_C
     alive = jnp.asarray(alive)
     sol0 = flow(model, x0, jnp.where(alive, t_s, 1e-12), config, event=False,
                 vector_field=field)
+    assert sol0.ys is not None  # saved at t1
     xs = sol0.ys[-1]
     x_k = xs.at[n:].add(impulse_velocity_jump(model, xs[:n], impulse))
     bad = model.fallen(xs[:n]) | model.fallen(x_k[:n]) | ~jnp.all(jnp.isfinite(x_k))
@@ -275,7 +277,7 @@ def _as_weights(model, Q, R, Q_jump):
     return Q, mat(R, m), Q if Q_jump is None else mat(Q_jump, r)
 
 
-def _stabilize(model, z, Q=None, R=None, Q_jump=None, *, torque_limit=jnp.inf,
+def _stabilize(model, z, Q=None, R=None, Q_jump=None, *, torque_limit: float | jax.Array = jnp.inf,
                num_points=401, config=TIGHT_CONFIG):
     # Weights, torque limit and gait as arrays: one compiled program serves them all.
     Q, R, Q_jump = _as_weights(model, Q, R, Q_jump)

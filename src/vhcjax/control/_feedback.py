@@ -83,7 +83,7 @@ class TransverseFeedback(eqx.Module):
         return jnp.clip(u, -self.torque_limit, self.torque_limit)
 
 
-def transverse_feedback(system, riccati, torque_limit=jnp.inf):
+def transverse_feedback(system, riccati, torque_limit: float | jax.Array = jnp.inf):
     """The `TransverseFeedback` of a `TransverseSystem` and its `RiccatiSolution`."""
     return TransverseFeedback(system.theta_plus, system.theta_minus, system.w, system.dw,
                               riccati.K, jnp.asarray(torque_limit, float))

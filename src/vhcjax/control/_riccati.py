@@ -117,6 +117,7 @@ def riccati_backward(model, system, Q=None, R=None, Q_jump=None, *, tol=1e-13,
     def body(carry):
         X1, _, i, _ = carry
         sol = sweep(X1, diffrax.SaveAt(t1=True))
+        assert sol.ys is not None  # saved at t1
         X0 = _sym(sol.ys[-1, r:].reshape(r, r))
         X1n = jump(X0)
         change = jnp.max(jnp.abs(X1n - X1)) / (1.0 + jnp.max(jnp.abs(X1n)))
@@ -127,6 +128,7 @@ def riccati_backward(model, system, Q=None, R=None, Q_jump=None, *, tol=1e-13,
     X1, change, iters, ok = jax.lax.while_loop(
         cond, body, (X1_init, jnp.asarray(jnp.inf), jnp.asarray(0), jnp.asarray(True)))
     sol = sweep(X1, diffrax.SaveAt(ts=system.s[::-1]))
+    assert sol.ys is not None  # saved at `ts`
     X = jax.vmap(_sym)(sol.ys[::-1, r:].reshape(-1, r, r))
     code = RESULTS.where(ok & (change <= tol), RESULTS.successful,
                          RESULTS.where(ok, RESULTS.not_converged, RESULTS.nonfinite))
@@ -166,6 +168,7 @@ def riccati_hamiltonian(model, system, Q=None, R=None, Q_jump=None, *, rtol=1e-1
         diffrax.ODETerm(field), diffrax.Tsit5(), t0=0.0, t1=1.0, dt0=None, y0=y0,
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
         saveat=diffrax.SaveAt(ts=system.s), max_steps=max_steps, throw=False)
+    assert sol.ys is not None  # saved at `ts`
     Z = sol.ys[:, r:].reshape(-1, 2 * r, 2 * r)
     JinvT = jnp.linalg.inv(system.J).T
     zero = jnp.zeros((r, r))

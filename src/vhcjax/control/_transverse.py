@@ -156,6 +156,7 @@ def transverse_system(model, x_plus, *, num_points=401):
         y0=y0, stepsize_controller=diffrax.ConstantStepSize(),
         saveat=diffrax.SaveAt(ts=s), max_steps=num_points + 8, throw=False)
     ys = sol.ys
+    assert ys is not None  # saved at `ts`
     w = ys[:, :r]
     A, B, c = jax.vmap(lambda ss, ww: phase_matrices(model, theta_plus, delta, ss, ww))(s, w)
     dw = jax.vmap(lambda ss, ww: phase_field(model, theta_plus, delta, ss, ww, u0)[0])(s, w)

@@ -245,6 +245,7 @@ def _boundary_abd(model, data, a, b, d, real, config):
         adjoint=diffrax.ForwardMode(),
         throw=False,
     )
+    assert sol.ys is not None  # saved at t1
     yc = sol.ys[-1]
     # Both ends in one batched call (one trace of the mass matrix and energies).
     dth2, det = jax.vmap(lambda th, y: singularity_terms(model, E0, th, y[0:1], y[1:2]))(

@@ -22,6 +22,8 @@ a step and get no time tangent. Reverse mode is not supported (nor is it by diff
 `ForwardMode`, which this replaces).
 """
 
+from collections.abc import Callable
+
 import diffrax
 import equinox as eqx
 import jax
@@ -75,7 +77,7 @@ class _Jitted(eqx.Module):
     several times (initial step size, solver state, step, event), and every call after
     the first reuses the first one's jaxpr."""
 
-    fn: eqx.Module
+    fn: Callable
 
     def __call__(self, t, y, args):
         return _call_jit(self.fn, t, y, args)
@@ -111,6 +113,8 @@ def _solve(params, y0, t0, t1, *, directions, solver, rtol, atol, max_steps, nor
         adjoint=diffrax.ForwardMode(),  # the plain while loop; never differentiated here
         throw=False,
     )
+    # Saved at t1, with an event: none of these is None.
+    assert sol.ts is not None and sol.ys is not None and sol.event_mask is not None
     return EventSolution(sol.ts, sol.ys, sol.result, tuple(sol.event_mask))
 
 

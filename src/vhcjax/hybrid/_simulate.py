@@ -84,7 +84,7 @@ def _event(model, gate=False):
 
 def flow(
     model, x0, t1, config=DEFAULT_CONFIG, *, saveat=None, event=True, adjoint=None,
-    vector_field=None, gate=False, t0=0.0,
+    vector_field=None, gate=False, t0: float | jax.Array = 0.0,
 ):
     """Integrate the swing dynamics from `x0` over `[t0, t1]`, stopping at heel strike
     (or, with `gate=True`, where the strike gate opens).
@@ -179,6 +179,7 @@ def _swing(model, x0, t_max, alive, config, adjoint, vector_field):
     t1 = jnp.where(alive, t_max, 1e-9 * t_max)
     if model.strike_gate(x0[: model.n_dof]) is None:
         sol = flow(model, x0, t1, config, adjoint=adjoint, vector_field=vector_field)
+        assert sol.ys is not None and sol.ts is not None  # saved at t1
         return sol.ys[-1], sol.ts[-1], classify_solve(sol)
     field, event = _latched(model, vector_field)
     y0 = jnp.concatenate([x0, jnp.zeros((1,), x0.dtype)])
@@ -195,6 +196,7 @@ def _swing(model, x0, t_max, alive, config, adjoint, vector_field):
             saveat=diffrax.SaveAt(t1=True), event=event, max_steps=config.max_steps,
             adjoint=adjoint, throw=False,
         )
+    assert sol.ys is not None and sol.ts is not None  # saved at t1
     return sol.ys[-1][:-1], sol.ts[-1], classify_solve(sol)
 
 
@@ -310,6 +312,7 @@ def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
                 saveat=diffrax.SaveAt(ts=ts),
                 event=False,
             )
+            assert sol.ys is not None  # saved at `ts`
             dense = (ts, jnp.where(alive, sol.ys, x))
         else:
             dense = None

@@ -283,6 +283,7 @@ def transverse_linearization(model, x_plus, x_minus, period, *, rtol=1e-11, atol
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
         event=event, max_steps=max_steps, throw=False,
     )
+    assert sol.ys is not None and sol.ts is not None  # saved at t1
     uT = sol.ys[-1]
     T = sol.ts[-1]
     code = RESULTS.where(
