@@ -28,7 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._bisection import bisect_threshold
+from ._bisection import bisect_threshold, Threshold
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, StepResult, classify_solve, flow
 from ._recovery import CONVERGED, recover
 from .._results import RESULTS
@@ -55,14 +55,17 @@ def swing_from(model, x, t0, t_max, config, vector_field=None):
     if it is already open at `x`, look for the strike at once)."""
     n = model.n_dof
     open0 = model.strike_gate(x[:n]) > 0
-    kw = dict(vector_field=vector_field)
-    sol1 = flow(model, x, jnp.where(open0, t0 + 1e-9, t_max), config, gate=True, t0=t0, **kw)
+    sol1 = flow(model, x, jnp.where(open0, t0 + 1e-9, t_max), config, gate=True, t0=t0,
+                vector_field=vector_field)
     code1 = classify_solve(sol1)
     opened = open0 | (code1 == RESULTS.successful)
+    assert sol1.ys is not None and sol1.ts is not None  # flow saves at t1
     x_mid = jnp.where(open0, x, sol1.ys[-1])
     t_mid = jnp.where(open0, t0, sol1.ts[-1])
-    sol2 = flow(model, x_mid, jnp.where(opened, t_max, t_mid + 1e-9), config, t0=t_mid, **kw)
+    sol2 = flow(model, x_mid, jnp.where(opened, t_max, t_mid + 1e-9), config, t0=t_mid,
+                vector_field=vector_field)
     code = RESULTS.where(opened, classify_solve(sol2), code1)
+    assert sol2.ys is not None and sol2.ts is not None  # flow saves at t1
     x_minus = jnp.where(opened, sol2.ys[-1], sol1.ys[-1])
     t_end = jnp.where(opened, sol2.ts[-1], t_mid)
     return x_minus, t_end, code
@@ -86,6 +89,7 @@ def _pushed_step(model, x0, t_push, kick, config, alive):
     t_s = jnp.maximum(t_push, 1e-12)
     alive = jnp.asarray(alive)
     sol0 = flow(model, x0, jnp.where(alive, t_s, 1e-12), config, event=False)
+    assert sol0.ys is not None  # flow saves at t1
     xs = sol0.ys[-1]
     x_k, t_k = kick(xs, t_s)
     bad = (model.fallen(xs[:n]) | model.fallen(x_k[:n]) | ~jnp.all(jnp.isfinite(x_k)))
@@ -125,6 +129,7 @@ def pulse_step(model, x0, t_push, force, duration, config=DEFAULT_CONFIG, alive=
 
     def kick(x, t):
         sol = flow(model, x, t + duration, config, event=False, vector_field=vf, t0=t)
+        assert sol.ys is not None  # flow saves at t1
         return sol.ys[-1], t + duration
 
     return _pushed_step(model, x0, t_push, kick, config, alive)
@@ -152,7 +157,8 @@ def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-
     transverse linearization (thesis 6.21, 6.30, 6.38) plus the input term
     $L(t_s) B(t_s)$. Needs the `vhcjax.stability` module.
     """
-    from .. import stability as tr
+    # The defining module: the package does not export `_joint_vector_field`, `_split`.
+    from ..stability import _transverse as tr
     n = model.n_dof
     k = n - 1
     r = 2 * k + 1
@@ -218,7 +224,7 @@ class PushThresholds(eqx.Module):
 
     phases: np.ndarray
     angles: np.ndarray
-    threshold: object
+    threshold: Threshold
     largest: np.ndarray
     most_fragile_phase: np.ndarray
     duration: float
