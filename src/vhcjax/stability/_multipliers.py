@@ -16,6 +16,7 @@
 """
 
 import math
+from typing import Any
 
 import diffrax
 import equinox as eqx
@@ -113,6 +114,7 @@ def _phase_monotone(model, x0, period, config):
     ts = jnp.linspace(0.0, 1.0, PHASE_SAMPLES) * period
     sol = flow(model, x0, period * (1 + 1e-12) + 1e-12, config, saveat=diffrax.SaveAt(ts=ts),
                event=False)
+    assert sol.ys is not None  # saved at `ts`
     dq1 = sol.ys[:, model.n_dof]
     s = jnp.sign(dq1[0])
     return jnp.all(s * dq1 > 1e-6 * jnp.max(jnp.abs(dq1))) & jnp.all(jnp.isfinite(dq1))
@@ -536,8 +538,8 @@ def bifurcation_diagram(psis, zs, *, model=None, num_transient=300, num_record=6
         pad = round_to_devices(k, mesh) - k
         ps = np.concatenate([ps, np.repeat(ps[-1:], pad)])
         xs = np.concatenate([xs, np.repeat(xs[-1:], pad, axis=0)])
-        p, r = _long_runs(model, *shard_batch((jnp.asarray(ps), jnp.asarray(xs)), mesh),
-                          num_transient + num_record, num_record, config)
+        ps, xs = shard_batch((jnp.asarray(ps), jnp.asarray(xs)), mesh)
+        p, r = _long_runs(model, ps, xs, num_transient + num_record, num_record, config)
         P.append(np.asarray(p)[:k])
         R.append(np.asarray(r._value)[:k])
     periods = np.concatenate(P)
@@ -650,6 +652,7 @@ def transverse_note(gm, index=None):
     name = result_names(_pick(gm.transverse_result._value, index))
     if name == "successful":
         return None
+    assert isinstance(name, str)  # one result: a single `GaitMultipliers` or `index` given
     msg = f"transverse linearization not used ({name}): {RESULTS[getattr(RESULTS, name)]}"
     dis = float(_pick(gm.disagreement, index))
     if name == "methods_disagree" and math.isfinite(dis):
@@ -669,7 +672,7 @@ def stability_json(gm, index=None):
     tr, pc = _pick(gm.transverse, index), _pick(gm.poincare, index)
     note = transverse_note(gm, index)
     dis = float(_pick(gm.disagreement, index))
-    out = {"multipliers": None if note else [[float(e.real), float(e.imag)] for e in tr]}
+    out: dict[str, Any] = {"multipliers": None if note else [[float(e.real), float(e.imag)] for e in tr]}
     if note:
         out["multipliers_reason"] = note
     out.update({
