@@ -1,6 +1,7 @@
 """Plain-Python conversion of results for `json.dumps`: never NaN or Infinity."""
 
 import math
+from typing import Any
 
 
 def _finite_or_none(v, path, nulls):
@@ -12,7 +13,7 @@ def _finite_or_none(v, path, nulls):
     return v
 
 
-def to_jsonable(obj, nulls=None, path=""):
+def to_jsonable(obj, nulls=None, path="") -> Any:  # the JSON value of `obj`
     """numpy/JAX arrays and scalars to plain Python for `json.dumps`.
 
     Non-finite numbers (NaN, inf) become `None` (JSON `null`, since strict JSON has no

@@ -3,6 +3,7 @@ a range of slopes)."""
 
 import csv
 import math
+from typing import Any
 
 from ._common import (
     FINITE, CLIError, add_model_choice, add_model_flags, check_output_file, check_slope_deg,
@@ -73,7 +74,7 @@ def _family_method(p, both):
                    help="vhc = thesis Problem 1, shooting = Problem 2 (default %(default)s)")
 
 
-def gait_json(gait, slope_deg):
+def gait_json(gait, slope_deg) -> dict[str, Any]:
     """The JSON record of one gait (a dict; other commands may add keys)."""
     import numpy as np
 
@@ -136,6 +137,7 @@ def run_gait(args):
     if not found:
         print(f"  no gait: {rec['reason']}")
         return 1
+    assert rec["params"] is not None  # set to None only when not found
     for k, v in rec["params"].items():
         print(f"  {k:>3} = {v: .9f}")
     print(f"  step length {float(gait.step_length):.6f} m, speed {float(gait.speed):.6f} m/s, "
