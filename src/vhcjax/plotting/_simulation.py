@@ -267,7 +267,10 @@ def animate(sim, model, path, *, fps=None, max_frames=300):
     for j in range(len(idx)):  # one draw per frame, straight into Pillow
         update(j)
         fig.canvas.draw()
-        images.append(Image.fromarray(np.asarray(fig.canvas.buffer_rgba())).convert(
+        # `buffer_rgba` is on every Agg-based canvas (the default one and the interactive
+        # ones), not on the FigureCanvasBase that matplotlib's stubs give `fig.canvas`.
+        rgba = fig.canvas.buffer_rgba()  # pyright: ignore[reportAttributeAccessIssue]  # Agg API
+        images.append(Image.fromarray(np.asarray(rgba)).convert(
             "P", palette=Image.Palette.ADAPTIVE, colors=64))
     plt.close(fig)
     images[0].save(path, save_all=True, append_images=images[1:],

@@ -30,7 +30,7 @@ def plot_multipliers_complex(sets, labels=None, path=None, title=None):
         ev = np.atleast_1d(np.asarray(ev))
         rmax = max(rmax, float(np.max(np.abs(ev))))
         lab = None if labels is None else labels[i]
-        ax.plot(ev.real, ev.imag, markers[i % len(markers)], ms=8 if i == 0 else 10,
+        ax.plot(np.real(ev), np.imag(ev), markers[i % len(markers)], ms=8 if i == 0 else 10,
                 mfc="none" if i == 0 else None, label=lab)
     lim = 1.15 * rmax
     ax.set_xlim(-lim, lim)

@@ -23,6 +23,7 @@ import math
 import os
 import platform
 import time
+from typing import Any
 
 import jax
 import jax.numpy as jnp
@@ -119,7 +120,7 @@ def category(row):
 # ---------------------------------------------------------------------------------------
 # Sizes
 # ---------------------------------------------------------------------------------------
-SIZES = {
+SIZES: dict[str, dict[str, Any]] = {
     "quick": dict(sim_steps=24, dense=24, settle_rounds=3, sweep_n=8, sweep_range=(1.0, 6.0),
                   bif_n=8,
                   bif_range=(4.0, 5.4), bif_transient=40, bif_record=16, basin=(11, 11),
@@ -230,8 +231,8 @@ def _split_ev(ev):
     """(real eigenvalue, re of the complex pair, |im| of the pair) of a 3-vector with
     one complex pair; None if all are real."""
     ev = np.asarray(ev)
-    cplx = ev[np.abs(ev.imag) > 1e-12]
-    real = ev[np.abs(ev.imag) <= 1e-12]
+    cplx = ev[np.abs(np.imag(ev)) > 1e-12]
+    real = ev[np.abs(np.imag(ev)) <= 1e-12]
     if len(cplx) != 2 or len(real) != 1:
         return None
     return float(real[0].real), float(cplx[0].real), float(abs(cplx[0].imag))
@@ -463,6 +464,7 @@ def reproduce(out_dir, quick=False, progress=None):
         tr, pc = _sorted_ev(m["transverse"][i]), _sorted_ev(m["poincare"][i])
         diff = _ev_check(m, i)
         sp = _split_ev(tr)
+        assert sp is not None  # the stable 3-deg gait has a complex pair (thesis 7.6)
         check = f"transverse linearization = Poincare-map Jacobian (autodiff) to {diff:.1e}"
         sec.compare("lambda1 (real)", "7.6", "lambda1", sp[0], check, 6)
         sec.compare("Re lambda2,3", "7.6", "re_lambda23", sp[1], check, 6)
@@ -675,7 +677,7 @@ def reproduce(out_dir, quick=False, progress=None):
     # ---- 9: slope sweeps of both families ---------------------------------------------
     def sweeps(sec):
         n = S["sweep_n"]
-        slopes = np.linspace(*S["sweep_range"], n)
+        slopes = np.linspace(*S["sweep_range"], num=n)
         sw, mults = {}, {}
         for fam in ("stable", "unstable"):
             g = _family(slopes, fam)
@@ -735,6 +737,7 @@ def reproduce(out_dir, quick=False, progress=None):
         res = {}
         for method in ("poincare", "transverse"):
             a, b = lo, hi
+            fa = fb = float("nan")
             for _ in range(S["pd_rounds"]):
                 s = np.linspace(a, b, CHUNK)
                 g = _gaits(s, z_lo[:2], "stable")
@@ -762,7 +765,7 @@ def reproduce(out_dir, quick=False, progress=None):
     # ---- 11: bifurcation diagram ------------------------------------------------------
     def bifurcation(sec):
         n = S["bif_n"]
-        slopes = np.linspace(*S["bif_range"], n)
+        slopes = np.linspace(*S["bif_range"], num=n)
         g = _family(slopes, "stable")
         ok = np.array(result_names(g.result)) == "successful"
         mm = _multipliers(slopes, np.asarray(g.z))
