@@ -672,7 +672,8 @@ def stability_json(gm, index=None):
     tr, pc = _pick(gm.transverse, index), _pick(gm.poincare, index)
     note = transverse_note(gm, index)
     dis = float(_pick(gm.disagreement, index))
-    out: dict[str, Any] = {"multipliers": None if note else [[float(e.real), float(e.imag)] for e in tr]}
+    out: dict[str, Any] = {
+        "multipliers": None if note else [[float(e.real), float(e.imag)] for e in tr]}
     if note:
         out["multipliers_reason"] = note
     out.update({
