@@ -35,6 +35,7 @@ from ._hybrid import DEFAULT_CONFIG, SolverConfig, _step
 from ._results import RESULTS
 from ._sharding import MAX_DISPATCH, device_multiple, host_workers, in_chunks, shard_batch
 from ._vhc import phi_second_derivative, singularity_terms
+from ._gait_derivatives import with_derivatives
 
 FAMILIES = ("stable", "unstable")
 METHODS = ("vhc", "shooting")
@@ -1057,12 +1058,15 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
     **Returns:** a `Gait`.
     """
     _check(family, method)
+    # Derivatives by the implicit function theorem, never through the search (_implicit).
+    params, model = model, jax.lax.stop_gradient(model)
     if guess is None:
         gait = continue_to_model(model, family, method)
     else:
-        guess = jnp.asarray(guess, dtype=float)
+        guess = jax.lax.stop_gradient(jnp.asarray(guess, dtype=float))
         gait = _search_jit(model, guess, family_sign(family), method, solver)
         gait = _relabel(gait, family)
+    gait = with_derivatives(params, gait, method, family_sign(family))
     if throw:
         err = gait.result != RESULTS.successful
         gait = eqx.tree_at(lambda g: g.a, gait, gait.result.error_if(gait.a, err))
@@ -1237,6 +1241,15 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     _check(family, method)
     if psi is not None:
         model = _with_psi(model, jnp.asarray(psi, dtype=float))
+    # Derivatives by the implicit function theorem, never through the search (_implicit).
+    params, model = model, jax.lax.stop_gradient(model)
+    if guesses is not None:
+        guesses = jax.lax.stop_gradient(guesses)
+    return with_derivatives(params, _find_gaits(model, guesses, family, method, solver, mesh,
+                                                chord, vectorise), method, family_sign(family))
+
+
+def _find_gaits(model, guesses, family, method, solver, mesh, chord, vectorise):
     sizes = [jnp.shape(x)[0] for x in jax.tree_util.tree_leaves(model) if eqx.is_array(x) and jnp.ndim(x) > 0]
     if guesses is not None:
         guesses = jnp.atleast_2d(jnp.asarray(guesses, dtype=float))
