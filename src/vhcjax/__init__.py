@@ -111,3 +111,15 @@ from ._gait import (  # noqa: E402
     sweep as sweep,
     vhc_search as vhc_search,
 )
+
+# ---- differentiable gaits: multipliers with derivatives, walker design, the parameter atlas ----
+from ._gait_spectrum import GaitSpectrum as GaitSpectrum, gait_spectrum as gait_spectrum  # noqa: E402
+from .design import (  # noqa: E402
+    Atlas as Atlas,
+    DesignResult as DesignResult,
+    FlipScan as FlipScan,
+    atlas as atlas,
+    design as design,
+    flip_slope as flip_slope,
+    flip_slopes as flip_slopes,
+)

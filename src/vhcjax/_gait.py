@@ -36,6 +36,7 @@ from ._results import RESULTS
 from ._sharding import MAX_DISPATCH, device_multiple, host_workers, in_chunks, shard_batch
 from ._vhc import phi_second_derivative, singularity_terms
 from ._gait_derivatives import with_derivatives
+from ._implicit import detach
 
 FAMILIES = ("stable", "unstable")
 METHODS = ("vhc", "shooting")
@@ -1059,11 +1060,11 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
     """
     _check(family, method)
     # Derivatives by the implicit function theorem, never through the search (_implicit).
-    params, model = model, jax.lax.stop_gradient(model)
+    params, model = model, detach(model)
     if guess is None:
         gait = continue_to_model(model, family, method)
     else:
-        guess = jax.lax.stop_gradient(jnp.asarray(guess, dtype=float))
+        guess = detach(jnp.asarray(guess, dtype=float))
         gait = _search_jit(model, guess, family_sign(family), method, solver)
         gait = _relabel(gait, family)
     gait = with_derivatives(params, gait, method, family_sign(family))
@@ -1242,9 +1243,9 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     if psi is not None:
         model = _with_psi(model, jnp.asarray(psi, dtype=float))
     # Derivatives by the implicit function theorem, never through the search (_implicit).
-    params, model = model, jax.lax.stop_gradient(model)
+    params, model = model, detach(model)
     if guesses is not None:
-        guesses = jax.lax.stop_gradient(guesses)
+        guesses = detach(guesses)
     return with_derivatives(params, _find_gaits(model, guesses, family, method, solver, mesh,
                                                 chord, vectorise), method, family_sign(family))
 

@@ -28,7 +28,18 @@ from ._compile import filter_jit
 def _inexact(x):
     if isinstance(x, float):  # a Python float primal (e.g. `jax.grad(f)(5.0)`)
         return True
-    return eqx.is_array(x) and jnp.issubdtype(jnp.result_type(x), jnp.inexact)
+    if not eqx.is_array(x) or x.dtype == jax.dtypes.float0:
+        return False
+    return jnp.issubdtype(x.dtype, jnp.inexact)
+
+
+def detach(tree):
+    """`jax.lax.stop_gradient(tree)` with float leaves as float64 arrays: what a search
+    runs on, so that it is never differentiated, and so that a float primal (which
+    `jax.grad(f)(5.0)` and `jax.jacfwd` hand over) does not become a compile-time
+    constant of a jitted search."""
+    tree = jax.lax.stop_gradient(tree)
+    return jax.tree_util.tree_map(lambda x: jnp.asarray(x, float) if isinstance(x, float) else x, tree)
 
 
 def _as_arrays(tree):
@@ -73,14 +84,14 @@ def _tangents(flat_tangent, like):
 
 
 @filter_jit
-def _sensitivity(fn, z, params, ok, args):
+def _sensitivity(fn, z, params, ok, args, static):
     """$S = \\partial_p o - \\partial_z o\\,(\\partial_z r)^{-1}\\partial_p r$ at $(z, p)$ for
     `fn(z, params, *args) -> (r, o)`, zero where not `ok` or not finite."""
     n = z.shape[0]
     p0 = _flat(params)
 
     def F(u):
-        r, o = fn(u[:n], _unflat(u[n:], params), *args)
+        r, o = fn(u[:n], _unflat(u[n:], params), *args, *static)
         return jnp.concatenate([jnp.ravel(r), _flat(o)])
 
     Jac = jax.jacfwd(F)(jnp.concatenate([z, p0]))
@@ -92,19 +103,20 @@ def _sensitivity(fn, z, params, ok, args):
     return jnp.where(good, S, 0.0)
 
 
-def implicit_outputs(fn, z, params, values, ok=True, args=()):
+def implicit_outputs(fn, z, params, values, ok=True, args=(), static=()):
     r"""Attach implicit-function-theorem derivatives to the outputs of a solved equation.
 
     **Arguments:**
 
-    - `fn`: `fn(z, params, *args) -> (r, o)`, the residual $r(z, p)$ (shape of `z`) and
+    - `fn`: `fn(z, params, *args, *static) -> (r, o)`, the residual $r(z, p)$ (shape of `z`) and
       the outputs $o(z, p)$ (a pytree); a module-level function (it keys a compile cache).
     - `z`: the converged solution $z^*$ (its own tangent is ignored: pass the value of a
       search run on `jax.lax.stop_gradient(params)`).
     - `params`: a pytree; the derivatives are taken with respect to its inexact leaves.
     - `values`: the outputs at $z^*$ as the search computed them (returned unchanged).
     - `ok`: where False (a failed search), every derivative is zero.
-    - `args`: further arguments of `fn`, not differentiated.
+    - `args`: further arguments of `fn` (arrays), not differentiated.
+    - `static`: further hashable arguments of `fn` (settings).
 
     **Returns:** `(z, values)` with tangents $\mathrm dz^* = -(\partial_z r)^{-1}
     \partial_p r\,\mathrm dp$ and $\mathrm do = (\partial_z o\,\mathrm dz^*/\mathrm dp +
@@ -122,7 +134,7 @@ def implicit_outputs(fn, z, params, values, ok=True, args=()):
         params, z, values, ok, args = primals
         dp = _flat(tangents[0])
         params = _as_arrays(params)  # a Python float would be static to the jit below
-        S = _sensitivity(fn, z, params, ok, args)
+        S = _sensitivity(fn, z, params, ok, args, static)
         dout = S @ dp
         n = z.shape[0]
         return (z, values), (dout[:n], _tangents(dout[n:], values))
@@ -130,29 +142,31 @@ def implicit_outputs(fn, z, params, values, ok=True, args=()):
     return attach(params, z, values, ok, args)
 
 
-def linearised(fn):
-    """`fn` (a pytree function of pytrees) with a JVP given by its forward-mode Jacobian
-    (`jax.jacfwd`) times the tangent of its inexact inputs: transposable, so reverse mode
-    works through `fn` even where it contains `while_loop`s (diffrax, root finders).
-    Integer outputs get float0 tangents."""
+def linearised(fn, *static):
+    """`fn(*args, *static)` (a pytree function of pytrees) with a JVP given by its
+    forward-mode Jacobian (`jax.jacfwd`) times the tangent of the inexact leaves of
+    `args`: transposable, so reverse mode works through `fn` even where it contains
+    `while_loop`s (diffrax, root finders). `static`: hashable arguments (settings), not
+    differentiated. Integer outputs get float0 tangents. `fn` should be a module-level
+    function (it keys a compile cache)."""
 
     @jax.custom_jvp
     def wrapped(*args):
-        return fn(*args)
+        return fn(*args, *static)
 
     @wrapped.defjvp
     def wrapped_jvp(primals, tangents):
-        out, J = _jacobian(fn, _as_arrays(primals))
+        out, J = _jacobian(fn, _as_arrays(primals), static)
         return out, _tangents(J @ _flat(tangents), out)
 
     return wrapped
 
 
 @filter_jit
-def _jacobian(fn, args):
+def _jacobian(fn, args, static):
     x = _flat(args)
-    out = fn(*args)
-    return out, jax.jacfwd(lambda v: _flat(fn(*_unflat(v, args))))(x)
+    out = fn(*args, *static)
+    return out, jax.jacfwd(lambda v: _flat(fn(*_unflat(v, args), *static)))(x)
 
 
 def _sorted_eig(J):
