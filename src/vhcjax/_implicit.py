@@ -22,7 +22,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._compile import filter_jit
 
 
 def _inexact(x):
@@ -83,7 +82,8 @@ def _tangents(flat_tangent, like):
     return jax.tree_util.tree_unflatten(treedef, out)
 
 
-@filter_jit
+# Plain `eqx.filter_jit`: one compile cache whether called under `jax.grad` or `jax.jacfwd`.
+@eqx.filter_jit
 def _sensitivity(fn, z, params, ok, args, static):
     """$S = \\partial_p o - \\partial_z o\\,(\\partial_z r)^{-1}\\partial_p r$ at $(z, p)$ for
     `fn(z, params, *args) -> (r, o)`, zero where not `ok` or not finite."""
@@ -162,7 +162,7 @@ def linearised(fn, *static):
     return wrapped
 
 
-@filter_jit
+@eqx.filter_jit
 def _jacobian(fn, args, static):
     x = _flat(args)
     out = fn(*args, *static)

@@ -20,6 +20,7 @@ SUBCOMMANDS = [
     "_cli_bifurcation",  # bifurcation, multipliers
     "_cli_robustness",  # contraction, basin, slope-sensitivity, push
     "_cli_reproduce",  # reproduce (thesis chapter 7 report)
+    "_cli_design",  # design, atlas
 ]
 
 

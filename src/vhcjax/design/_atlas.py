@@ -34,6 +34,33 @@ def grid_model(mass_ratio, length_ratio, *, mass_leg=5.0, leg_length=1.0, gravit
                        b=full(beta * a), g=full(gravity), psi=full(psi))
 
 
+#: The stable gait of thesis Table 1 at 3 degrees (section point), the homotopy's start.
+_REFERENCE_Z = (0.2186688, -1.09238359, -0.37737395)
+_LEAVES = ("m1", "m2", "mH", "a", "b", "g", "psi")
+
+
+def seed_gaits(model, num=16):
+    """Stable gaits (section points, `(B, 3)`, NaN where lost) of a batch of models, by
+    homotopy from thesis Table 1 at 3 degrees: every parameter interpolated
+    geometrically in `num` steps, each step one batched `find_gaits` (shooting) from
+    the last step's gaits."""
+    ref = CompassGait()
+    B = int(np.shape(model.mH)[0])
+    z = np.tile(np.asarray(_REFERENCE_Z), (B, 1))
+    alive = np.ones(B, bool)
+    for s in np.linspace(0.0, 1.0, num + 1)[1:]:
+        m = model
+        for name in _LEAVES:
+            p0 = float(getattr(ref, name))
+            p1 = jnp.broadcast_to(jnp.asarray(getattr(model, name), float), (B,))
+            m = eqx.tree_at(lambda mm: getattr(mm, name), m, p0 * (p1 / p0) ** s)
+        g = find_gaits(m, jnp.asarray(z), method="shooting")
+        good = np.asarray(g.result == RESULTS.successful)
+        alive &= good
+        z = np.where(good[:, None], np.asarray(g.z), z)
+    return np.where(alive[:, None], z, np.nan)
+
+
 class Atlas(eqx.Module):
     """The atlas over `mass_ratio` x `length_ratio` (numpy; arrays indexed `[i_mu, j_beta]`).
 
@@ -70,7 +97,7 @@ def atlas(mass_ratio, length_ratio, *, slope=None, mass_leg=5.0, leg_length=1.0,
     - `mass_leg` (kg), `leg_length` (m), `gravity` (m/s^2): the scales (they do not
       change the slopes or the spectral radius).
     - `psi_start`, `psi_max`, `step`: the slope scan (rad). The gaits at `psi_start`
-      are continued from the default model's (homotopy in the parameters).
+      are continued from the default model's (`seed_gaits`).
 
     **Returns:** an `Atlas`.
     """
@@ -80,9 +107,8 @@ def atlas(mass_ratio, length_ratio, *, slope=None, mass_leg=5.0, leg_length=1.0,
     model = grid_model(MU.ravel(), BETA.ravel(), mass_leg=mass_leg, leg_length=leg_length,
                        gravity=gravity, psi=psi_start)
     N = MU.size
-    start = find_gaits(model, None, method="shooting")
-    ok = np.asarray(start.result == RESULTS.successful)
-    z0 = np.where(ok[:, None], np.asarray(start.z), np.nan)
+    z0 = seed_gaits(model)
+    ok = np.isfinite(z0).all(axis=1)
     scan = flip_slopes(model, z0, psi_start, psi_max=psi_max, step=step)
     reason = [r if ok[i] else "no stable gait at the start of the scan" for i, r in enumerate(scan.reason)]
     rho = np.full(N, np.nan)
