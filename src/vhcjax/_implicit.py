@@ -152,7 +152,7 @@ def linearised(fn, *static):
 
     @jax.custom_jvp
     def wrapped(*args):
-        return fn(*args, *static)
+        return _apply(fn, _as_arrays(args), static)
 
     @wrapped.defjvp
     def wrapped_jvp(primals, tangents):
@@ -160,6 +160,11 @@ def linearised(fn, *static):
         return out, _tangents(J @ _flat(tangents), out)
 
     return wrapped
+
+
+@eqx.filter_jit
+def _apply(fn, args, static):
+    return fn(*args, *static)
 
 
 @eqx.filter_jit
