@@ -57,8 +57,8 @@ def register(subparsers):
                    help="slope where the scan starts (degrees, default 1)")
     a.add_argument("--scan-max-deg", type=float, default=12.0,
                    help="highest slope scanned for the flip (degrees, default 12)")
-    a.add_argument("--scan-step-deg", type=float, default=0.25,
-                   help="slope step of the scan (degrees, default 0.25)")
+    a.add_argument("--scan-step-deg", type=float, default=0.5,
+                   help="slope step of the scan (degrees, default 0.5)")
     a.add_argument("--json", action="store_true",
                    help='print {"mass_ratio", "length_ratio", "cells": [{"mass_ratio", '
                    '"length_ratio", "flip_slope_deg", "stable_range_deg", "spectral_radius"}]}')

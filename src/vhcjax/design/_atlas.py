@@ -39,7 +39,7 @@ _REFERENCE_Z = (0.2186688, -1.09238359, -0.37737395)
 _LEAVES = ("m1", "m2", "mH", "a", "b", "g", "psi")
 
 
-def seed_gaits(model, num=16):
+def seed_gaits(model, num=10):
     """Stable gaits (section points, `(B, 3)`, NaN where lost) of a batch of models, by
     homotopy from thesis Table 1 at 3 degrees: every parameter interpolated
     geometrically in `num` steps, each step one batched `find_gaits` (shooting) from
@@ -87,7 +87,7 @@ class Atlas(eqx.Module):
 
 def atlas(mass_ratio, length_ratio, *, slope=None, mass_leg=5.0, leg_length=1.0,
           gravity=9.81, psi_start=math.radians(1.0), psi_max=math.radians(12.0),
-          step=math.radians(0.25)):
+          step=math.radians(0.5), tol=1e-10):
     """The atlas of the stable compass gait over a grid of $\\mu$ and $\\beta$.
 
     **Arguments:**
@@ -96,8 +96,8 @@ def atlas(mass_ratio, length_ratio, *, slope=None, mass_leg=5.0, leg_length=1.0,
     - `slope`: where to report the spectral radius (rad), or `None`.
     - `mass_leg` (kg), `leg_length` (m), `gravity` (m/s^2): the scales (they do not
       change the slopes or the spectral radius).
-    - `psi_start`, `psi_max`, `step`: the slope scan (rad). The gaits at `psi_start`
-      are continued from the default model's (`seed_gaits`).
+    - `psi_start`, `psi_max`, `step`: the slope scan (rad); `tol`: of the flip slopes
+      (rad). The gaits at `psi_start` are continued from the default model's (`seed_gaits`).
 
     **Returns:** an `Atlas`.
     """
@@ -107,9 +107,13 @@ def atlas(mass_ratio, length_ratio, *, slope=None, mass_leg=5.0, leg_length=1.0,
     model = grid_model(MU.ravel(), BETA.ravel(), mass_leg=mass_leg, leg_length=leg_length,
                        gravity=gravity, psi=psi_start)
     N = MU.size
-    z0 = seed_gaits(model)
+    # Seeds on the walker with the default scales (the homotopy from Table 1 changes mu and
+    # beta only), mapped to these scales: angles are unchanged, velocities scale with
+    # sqrt(g / l).
+    z0 = seed_gaits(grid_model(MU.ravel(), BETA.ravel(), psi=psi_start))
+    z0[:, 1:] *= math.sqrt((gravity / leg_length) / (9.81 / 1.0))
     ok = np.isfinite(z0).all(axis=1)
-    scan = flip_slopes(model, z0, psi_start, psi_max=psi_max, step=step)
+    scan = flip_slopes(model, z0, psi_start, psi_max=psi_max, step=step, tol=tol)
     reason = [r if ok[i] else "no stable gait at the start of the scan" for i, r in enumerate(scan.reason)]
     rho = np.full(N, np.nan)
     if slope is not None and ok.any():
