@@ -51,9 +51,9 @@ def _broadcast(model, B):
     )
 
 
-def _evaluate(model, psi, zs):
+def _evaluate(model, psi, zs, solver="newton"):
     """Gaits at slopes `psi` (B,) from guesses `zs` (B, 3): section points, ok, F, rho."""
-    gaits = find_gaits(model, zs, method="shooting", psi=psi)
+    gaits = find_gaits(model, zs, method="shooting", psi=psi, solver=solver)
     ok = np.asarray(gaits.result == RESULTS.successful)
     z = np.asarray(gaits.z)
     F, rho = _det_and_radius(_with_psi(model, psi), jnp.asarray(z))
@@ -144,7 +144,9 @@ def flip_slopes(model, z_start, psi_start, *, psi_max=math.radians(12.0),
         c = np.where(active & bad, 0.5 * (a + b), c)
         w = np.clip((c - a) / np.where(b != a, b - a, 1.0), 0, 1)[:, None]
         zc_guess = np.where(active[:, None], za + (zb - za) * w, za)
-        zc, ok, Fc, _ = _evaluate(model, np.where(active, c, a), zc_guess)
+        # Plain Newton (optimistix) here: the guesses are already very close, closer
+        # than the loose first integration of the damped search resolves.
+        zc, ok, Fc, _ = _evaluate(model, np.where(active, c, a), zc_guess, "optimistix")
         failed = active & ~ok
         for i in np.nonzero(failed)[0]:
             reason[i] = "the refinement lost the gait inside the bracket"
