@@ -73,11 +73,14 @@ def _step_jacobian(z, model, config):
     return jax.jacfwd(lambda zz: gait_outputs(model, zz, config)[0])(z)
 
 
+_gait_outputs_jit = eqx.filter_jit(gait_outputs)
+
+
 def _implicit(model, z, config):
     # The general mechanism (`_implicit`): the fixed point and its outputs carry
     # implicit-function-theorem tangents, the step-map Jacobian its forward-over-forward
     # one; one `jax.jvp` along the slope gives every total derivative.
-    values = gait_outputs(model, z, config)
+    values = _gait_outputs_jit(model, z, config)
 
     def along(psi):
         m = _with_psi(model, psi)

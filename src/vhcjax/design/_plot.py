@@ -27,10 +27,12 @@ def plot_design(result, path, slope_deg):
     ax1.set_ylabel(_LABELS[result.objective])
     ax1.grid(alpha=0.3)
     for name in result.vary:
-        ax2.plot(it, [h["params"][name] for h in result.history], "o-",
-                 label=f"{name} ({UNITS[name]})")
+        lo, hi = result.bounds[name]
+        ax2.plot(it, [(h["params"][name] - lo) / (hi - lo) for h in result.history], "o-",
+                 label=f"{name}: {lo:g} to {hi:g} {UNITS[name]}")
+    ax2.set_ylim(-0.05, 1.05)
     ax2.set_xlabel("iteration (-)")
-    ax2.set_ylabel("parameter value (units in legend)")
+    ax2.set_ylabel("position within bounds (-)")
     ax2.legend()
     ax2.grid(alpha=0.3)
     fig.suptitle(f"Compass-gait design: {result.objective} at {slope_deg:g} deg, "
@@ -65,7 +67,7 @@ def plot_atlas(at, path, *, mass_leg, leg_length, gravity):
         ax.clabel(cs, fmt="%.2f", fontsize=8)
     ax.set_xlabel(r"mass ratio $\mu = m_H / m$ (-)")
     ax.set_ylabel(r"length ratio $\beta = b / a$ (-)")
-    ax.set_title(f"Compass gait: flip slope of the stable gait over ({len(mu)} x {len(beta)}) "
+    ax.set_title(f"Compass gait: flip slope of the stable gait on a {len(mu)} x {len(beta)} "
                  f"grid\nm = {mass_leg:g} kg, l = {leg_length:g} m, g = {gravity:g} m/s^2; "
                  "blank: no flip found", fontsize=10)
     fig.tight_layout()
