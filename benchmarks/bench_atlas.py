@@ -44,6 +44,7 @@ def main(argv=None):
            "found": int(np.isfinite(at.flip_slope).sum()),
            "device": str(jax.devices()[0]), "cpu_count": __import__("os").cpu_count(),
            "platform": platform.platform()}
+    print(json.dumps(out), flush=True)
     if args.repeat:
         t0 = time.perf_counter()
         vj.atlas(mu, beta, slope=math.radians(3.0))
@@ -52,11 +53,11 @@ def main(argv=None):
     ok = np.argwhere(np.isfinite(at.flip_slope))
     errs = []
     for i, j in ok[rng.choice(len(ok), size=min(args.check, len(ok)), replace=False)]:
-        m = grid_model(mu[i], beta[j], psi=math.radians(3.0))
-        z = np.asarray(vj.find_gait(m, method="shooting").z)
         f = at.flip_slope[i, j]
-        pd = vj.period_doubling_slope(math.radians(3.0), f + math.radians(0.2), z, model=m,
-                                      tol=1e-12)
+        lo = f - math.radians(0.2)  # a bracket around the flip, the gait continued there
+        m = grid_model(mu[i], beta[j], psi=lo)
+        z = np.asarray(vj.find_gait(m, method="shooting").z)
+        pd = vj.period_doubling_slope(lo, f + math.radians(0.2), z, model=m, tol=1e-12)
         errs.append(abs(math.degrees(f - pd.psi)))
     out["check_max_error_deg"] = max(errs) if errs else None
     print(json.dumps(out, indent=1))
