@@ -1056,6 +1056,10 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
     - `solver`: VHC only: `"newton"` (default), `"lm"`, `"optimistix"` or `"optax"`.
     - `throw`: raise if no gait was found.
 
+    Differentiable (`jax.grad`, `jax.jacfwd`, ...) with respect to every model parameter:
+    exact derivatives by the implicit function theorem at the gait, never through the
+    search (`vhcjax._implicit`).
+
     **Returns:** a `Gait`.
     """
     _check(family, method)
@@ -1236,6 +1240,8 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     padded batch is compiled as two programs at once, the Newton loop and the rest
     (`_compile.compile_pair`, kept until `vj.clear_caches()`); inside a JAX
     transformation, as one.
+
+    Differentiable like `find_gait`; a failed member has zero derivatives.
 
     **Returns:** a `Gait` with a leading batch axis; check `result` per member.
     """
