@@ -3,7 +3,6 @@ extrapolated central differences of re-solved gaits, forward against reverse mod
 eigenvalue-perturbation derivatives of the multipliers, and zero derivatives of failed
 members."""
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -52,7 +51,7 @@ def richardson(f, p, rel=2e-3):
 
 @pytest.mark.parametrize("method", ["vhc", "shooting"])
 def test_gait_derivatives_vs_richardson(method):
-    f = lambda p: outputs(p, method)  # noqa: E731
+    f = lambda p: outputs(p, method)
     for p in (TABLE1, RANDOM):
         J = np.asarray(jax.jacfwd(f)(jnp.asarray(p)))
         fd = richardson(f, p)
@@ -61,7 +60,7 @@ def test_gait_derivatives_vs_richardson(method):
 
 
 def test_forward_and_reverse_agree_and_batch():
-    f = lambda p: outputs(p, "vhc")  # noqa: E731
+    f = lambda p: outputs(p, "vhc")
     p = jnp.asarray(RANDOM)
     Jf = np.asarray(jax.jacfwd(f)(p))
     Jr = np.asarray(jax.jacrev(f)(p))
@@ -110,7 +109,7 @@ def test_multiplier_derivatives_vs_richardson():
     fd = richardson(spec, TABLE1)
     scale = np.maximum(np.abs(fd), 1e-3 * np.abs(fd).max())
     assert np.max(np.abs(J - fd) / scale) < 1e-6, np.max(np.abs(J - fd) / scale)
-    rho = lambda p: spec(p)[3]  # noqa: E731
+    rho = lambda p: spec(p)[3]
     np.testing.assert_allclose(np.asarray(jax.grad(rho)(p)), J[3], rtol=1e-10,
                                atol=1e-12 * np.abs(J[3]).max())
 

@@ -23,7 +23,6 @@ import jax.numpy as jnp
 import numpy as np
 
 
-
 def _inexact(x):
     if isinstance(x, float):  # a Python float primal (e.g. `jax.grad(f)(5.0)`)
         return True

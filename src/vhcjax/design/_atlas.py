@@ -29,7 +29,7 @@ def grid_model(mass_ratio, length_ratio, *, mass_leg=5.0, leg_length=1.0, gravit
     beta = jnp.asarray(length_ratio, float)
     a = leg_length / (1.0 + beta)
     shape = jnp.broadcast_shapes(mu.shape, beta.shape)
-    full = lambda v: jnp.broadcast_to(jnp.asarray(v, float), shape)  # noqa: E731
+    full = lambda v: jnp.broadcast_to(jnp.asarray(v, float), shape)
     return CompassGait(m1=full(mass_leg), m2=full(mass_leg), mH=full(mu * mass_leg), a=full(a),
                        b=full(beta * a), g=full(gravity), psi=full(psi))
 
