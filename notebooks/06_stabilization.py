@@ -26,6 +26,7 @@
 # %%
 import math
 import os
+import tempfile
 
 import jax
 import numpy as np
@@ -33,7 +34,10 @@ import numpy as np
 import vhcjax as vj
 
 FULL = os.environ.get("VHCJAX_FULL") == "1"
-os.makedirs("notebook_out", exist_ok=True)
+# Figures go to $VHCJAX_NOTEBOOK_OUT, or to a fresh temporary folder: never into the
+# repository.
+OUT = os.environ.get("VHCJAX_NOTEBOOK_OUT") or tempfile.mkdtemp(prefix="vhcjax_06_")
+os.makedirs(OUT, exist_ok=True)
 
 cases = {}
 for name, deg, family in (("unstable 3 deg", 3.0, "unstable"), ("symmetric 5 deg", 5.0, "stable")):
@@ -104,7 +108,7 @@ for name, (model, z) in cases.items():
     basin = {"z_star": np.asarray(z), "offsets_x": np.asarray(bc.offsets_x),
                  "offsets_y": np.asarray(bc.offsets_y), "closed": np.asarray(bc.converged),
                  "passive": np.asarray(bp.converged)}
-    fname = "notebook_out/06_" + name.replace(" ", "_") + ".png"
+    fname = os.path.join(OUT, "06_" + name.replace(" ", "_") + ".png")
     vj.control.plot_stabilization(fname, f"Compass gait, {name} gait, hip-torque LQR",
                                   np.asarray(st.system.s), np.asarray(st.riccati.K),
                                   errors[name][0], errors[name][1], basin)

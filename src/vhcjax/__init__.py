@@ -153,6 +153,18 @@ from .control import (  # noqa: E402
     with_torque_limit as with_torque_limit,
 )
 
+# ---- differentiable gaits: multipliers with derivatives, walker design, the parameter atlas ----
+from .stability import GaitSpectrum as GaitSpectrum, gait_spectrum as gait_spectrum  # noqa: E402
+from .parameters import (  # noqa: E402
+    Atlas as Atlas,
+    DesignResult as DesignResult,
+    FlipScan as FlipScan,
+    atlas as atlas,
+    design as design,
+    flip_slope as flip_slope,
+    flip_slopes as flip_slopes,
+)
+
 from ._cache import enable_default_cache as _enable_default_cache  # noqa: E402
 
 _enable_default_cache()

@@ -20,6 +20,7 @@ SUBCOMMANDS = [
     "_bifurcation",  # bifurcation, multipliers
     "_robustness",  # contraction, basin, slope-sensitivity, push
     "_stabilize",  # stabilize (transverse-linearization feedback)
+    "_design",  # design, atlas
     "_reproduce",  # reproduce (thesis chapter 7 report)
 ]
 

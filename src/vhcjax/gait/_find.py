@@ -19,6 +19,8 @@ from ._dispatch import _search
 from ._dispatch import reference_model
 from ._gait import family_sign
 from ._problem1 import _with_psi
+from ._derivatives import with_derivatives
+from ..solvers import detach
 
 
 def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newton", throw=True):
@@ -34,16 +36,22 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
     - `solver`: VHC only: `"newton"` (default), `"lm"`, `"optimistix"` or `"optax"`.
     - `throw`: raise if no gait was found.
 
+    Differentiable (`jax.grad`, `jax.jacfwd`, ...) with respect to every model parameter:
+    exact derivatives by the implicit function theorem at the gait, never through the
+    search (`vhcjax.solvers.implicit_outputs`).
+
     **Returns:** a `Gait`.
     """
     _check(family, method)
+    params, model = model, detach(model)  # the search itself is never differentiated
     if guess is None:
         gait = continue_to_model(model, family, method)
     else:
-        guess = jnp.asarray(guess, dtype=float)
+        guess = detach(jnp.asarray(guess, dtype=float))
         gait = _search_one_jit(model, guess, family_sign(family), method, solver)
         gait = _relabel(gait, family)
     gait = _clean_failed(gait, guess)
+    gait = with_derivatives(params, gait, method, family_sign(family))
     if throw:
         err = gait.result != RESULTS.successful
         gait = eqx.tree_at(lambda g: g.a, gait, gait.result.error_if(gait.a, err))
@@ -142,6 +150,8 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     XLA runs each program on one core). Each chunk is split over the devices of `mesh`.
     A different split changes the results by rounding only, with the same result codes.
 
+    Differentiable like `find_gait`; a failed member has zero derivatives.
+
     **Returns:** a `Gait` with a leading batch axis; check `result` per member.
     """
     _check(family, method)
@@ -152,6 +162,14 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
         )
     if psi is not None:
         model = _with_psi(model, jnp.asarray(psi, dtype=float))
+    params, model = model, detach(model)  # the search itself is never differentiated
+    if guesses is not None:
+        guesses = detach(guesses)
+    gaits = _find_gaits(model, guesses, family, method, solver, mesh, chord)
+    return with_derivatives(params, gaits, method, family_sign(family))
+
+
+def _find_gaits(model, guesses, family, method, solver, mesh, chord):
     sizes = [
         jnp.shape(x)[0] for x in jax.tree_util.tree_leaves(model)
         if eqx.is_array(x) and jnp.ndim(x) > 0

@@ -31,3 +31,4 @@ from ._stability import (
 )
 
 from ._control import plot_stabilization as plot_stabilization
+from ._parameters import plot_atlas as plot_atlas, plot_design as plot_design

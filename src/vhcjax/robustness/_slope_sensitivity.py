@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..hybrid import DEFAULT_CONFIG
+from ..solvers import implicit_outputs, linearised
 
 
 def _with_psi(model, psi):
@@ -62,27 +63,33 @@ class SlopeSensitivity(eqx.Module):
     djacobian: jax.Array
 
 
-@eqx.filter_jit
+def _fixed_point_fn(z, model, config):
+    """Residual $P(z) - z$ of the step map and the outputs $(P(z), T, L, v)$."""
+    out = gait_outputs(model, z, config)
+    return out[0] - z, out
+
+
+def _step_jacobian(z, model, config):
+    return jax.jacfwd(lambda zz: gait_outputs(model, zz, config)[0])(z)
+
+
+_gait_outputs_jit = eqx.filter_jit(gait_outputs)
+
+
 def _implicit(model, z, config):
-    # One second-order forward trace over u = (z, psi): the first derivatives of all
-    # outputs and the derivatives of the step-map Jacobian J = dP/dz in every direction.
-    nz = z.shape[0]
-    u = jnp.concatenate([z, jnp.asarray(model.psi, dtype=float)[None]])
+    # The general mechanism (`_implicit`): the fixed point and its outputs carry
+    # implicit-function-theorem tangents, the step-map Jacobian its forward-over-forward
+    # one; one `jax.jvp` along the slope gives every total derivative.
+    values = _gait_outputs_jit(model, z, config)
 
-    def F(uu):
-        return gait_outputs(_with_psi(model, uu[nz]), uu[:nz], config)
+    def along(psi):
+        m = _with_psi(model, psi)
+        zz, outs = implicit_outputs(_fixed_point_fn, z, m, values, True, static=(config,))
+        return zz, outs, linearised(_step_jacobian, config)(zz, m)
 
-    def first(uu):
-        d = jax.jacfwd(F)(uu)
-        return d[0][:, :nz], (d, F(uu))
-
-    H, (d, outs) = jax.jacfwd(first, has_aux=True)(u)  # H[i, j, k] = d J_ij / d u_k
-    J = d[0][:, :nz]
-    dz = jnp.linalg.solve(jnp.eye(nz) - J, d[0][:, nz])
-    du = jnp.concatenate([dz, jnp.ones(1)])
-    total = [d[i] @ du for i in (1, 2, 3)]
-    dJ = H @ du
-    return outs, dz, total, J, dJ
+    psi = jnp.asarray(model.psi, dtype=float)
+    (_, outs, J), (dz, douts, dJ) = jax.jvp(along, (psi,), (jnp.ones_like(psi),))
+    return outs, dz, douts[1:], J, dJ
 
 
 def slope_sensitivity(model, z_star, *, config=DEFAULT_CONFIG):

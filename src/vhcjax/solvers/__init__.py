@@ -9,3 +9,9 @@ from ._newton import (
     levenberg_marquardt as levenberg_marquardt,
     optax_minimise as optax_minimise,
 )
+from ._implicit import (
+    detach as detach,
+    eigenvalues as eigenvalues,
+    implicit_outputs as implicit_outputs,
+    linearised as linearised,
+)

@@ -47,3 +47,4 @@ from ._transverse import (
     transverse_linearization as transverse_linearization,
     TransverseLinearization as TransverseLinearization,
 )
+from ._spectrum import GaitSpectrum as GaitSpectrum, gait_spectrum as gait_spectrum

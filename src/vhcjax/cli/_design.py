@@ -1,0 +1,261 @@
+"""`vhcjax design` and `vhcjax atlas`: walker design by gradient, and the flip-slope atlas
+over mass and length ratios."""
+
+import csv
+import math
+
+from ._common import CLIError, add_model_flags, check_finite, model_from_args, print_json, progress
+
+PARAMETERS = ("mass-hip", "mass-leg", "a", "b", "gravity")
+OBJECTIVES = ("spectral-radius", "flip-slope", "speed")
+ATLAS_CSV = ["mass_ratio", "length_ratio", "flip_slope_deg", "stable_lo_deg",
+             "stable_hi_deg", "spectral_radius", "reason"]
+
+
+def register(subparsers):
+    p = subparsers.add_parser(
+        "design",
+        help="optimise walker parameters by gradient (exact implicit derivatives)",
+        description="Optimise the compass gait's parameters within bounds for an objective "
+        "of its stable gait at --slope-deg: the spectral radius (minimised), the slope where "
+        "the gait period-doubles (maximised) or the speed (maximised). Projected Adam "
+        "(optax) on exact gradients (implicit function theorem at each gait); every iterate "
+        "is a converged gait continued from the last. The model flags give the start.",
+    )
+    add_model_flags(p)
+    p.add_argument("--objective", required=True, choices=OBJECTIVES)
+    p.add_argument("--vary", required=True, metavar="NAMES",
+                   help="comma-separated parameters to vary, from " + ", ".join(PARAMETERS))
+    p.add_argument("--bounds", metavar="NAME=LO:HI,...",
+                   help="bounds of varied parameters (SI units), e.g. mass-hip=1:40,a=0.1:0.9; "
+                   "default mass 1:40 (hip) 1:20 (leg) kg, lengths 0.1:0.9 m, gravity 1:20")
+    p.add_argument("--steps", type=int, default=30, help="iterations at most (default 30)")
+    p.add_argument("--learning-rate", type=float, default=0.05,
+                   help="Adam rate in the parameters scaled to [0, 1] (default 0.05)")
+    p.add_argument("--json", action="store_true",
+                   help='print {"objective", "slope_deg", "vary", "result", "iterations", '
+                   '"initial", "optimum", "history"}')
+    p.add_argument("--png", metavar="FILE", help="objective and parameters against iteration")
+    p.set_defaults(func=run_design)
+
+    a = subparsers.add_parser(
+        "atlas",
+        help="flip slope and stable slope range over mass and length ratios",
+        description="Over a grid of mass ratio mu = mH/m and length ratio beta = b/a, the "
+        "first period-doubling slope of the stable period-1 gait, the slope range where it "
+        "is stable, and its spectral radius at --slope-deg if given; all cells batched. The "
+        "leg mass (--mass-leg), leg length (--a + --b) and gravity only set the scales.",
+    )
+    add_model_flags(a, slope=False)
+    a.add_argument("--mass-ratio", required=True, metavar="START:STOP:STEP|LIST",
+                   help="mass ratios mH/m, e.g. 1:4:0.5 (inclusive) or 1,2,3")
+    a.add_argument("--length-ratio", required=True, metavar="START:STOP:STEP|LIST",
+                   help="length ratios b/a, e.g. 0.6:1.4:0.2 or 0.8,1,1.2")
+    a.add_argument("--slope-deg", type=float, default=None,
+                   help="report the spectral radius at this slope (degrees, in (0, 30))")
+    a.add_argument("--scan-start-deg", type=float, default=1.0,
+                   help="slope where the scan starts (degrees, default 1)")
+    a.add_argument("--scan-max-deg", type=float, default=12.0,
+                   help="highest slope scanned for the flip (degrees, default 12)")
+    a.add_argument("--scan-step-deg", type=float, default=0.5,
+                   help="slope step of the scan (degrees, default 0.5)")
+    a.add_argument("--json", action="store_true",
+                   help='print {"mass_ratio", "length_ratio", "cells": [{"mass_ratio", '
+                   '"length_ratio", "flip_slope_deg", "stable_range_deg", "spectral_radius"}]}')
+    a.add_argument("--csv", metavar="FILE", help="one row per cell: " + ", ".join(ATLAS_CSV))
+    a.add_argument("--png", metavar="FILE", help="heat map of the flip slope with contours")
+    a.set_defaults(func=run_atlas)
+
+
+def _positive(name, v):
+    check_finite(name, v)
+    if v <= 0:
+        raise CLIError(f"{name} must be positive, got {v}")
+
+
+def parse_vary(text):
+    names = [t.strip() for t in text.split(",") if t.strip()]
+    if not names:
+        raise CLIError("--vary needs at least one parameter")
+    for n in names:
+        if n not in PARAMETERS:
+            raise CLIError(f"--vary: unknown parameter {n!r} (choose from {', '.join(PARAMETERS)})")
+    if len(set(names)) != len(names):
+        raise CLIError(f"--vary lists a parameter twice: {text!r}")
+    return names
+
+
+def parse_bounds(text, vary):
+    out = {}
+    if not text:
+        return out
+    for item in text.split(","):
+        try:
+            name, rng = item.split("=")
+            lo, hi = (float(x) for x in rng.split(":"))
+        except ValueError:
+            raise CLIError(f"--bounds must be NAME=LO:HI,..., got {item!r}") from None
+        name = name.strip()
+        if name not in vary:
+            raise CLIError(f"--bounds: {name!r} is not in --vary")
+        check_finite("--bounds", lo, hi)
+        if not 0 < lo < hi:
+            raise CLIError(f"--bounds: {name} needs 0 < LO < HI, got {lo}:{hi}")
+        out[name] = (lo, hi)
+    return out
+
+
+def parse_values(text, name):
+    """`START:STOP:STEP` (inclusive) or a comma-separated list of positive numbers."""
+    try:
+        if ":" in text:
+            start, stop, step = (float(x) for x in text.split(":"))
+            check_finite(name, start, stop, step)
+            if step <= 0 or stop < start:
+                raise CLIError(f"{name} needs STEP > 0 and STOP >= START, got {text!r}")
+            n = int(math.floor((stop - start) / step + 0.5)) + 1
+            values = [start + i * step for i in range(n)]
+        else:
+            values = [float(x) for x in text.split(",")]
+    except ValueError:
+        raise CLIError(f"{name} must be START:STOP:STEP or a list like 1,2,3, got {text!r}") from None
+    for v in values:
+        _positive(name, v)
+    if len(values) > 200:
+        raise CLIError(f"{name}: at most 200 values, got {len(values)}")
+    return values
+
+
+def _params_json(params):
+    return {k: float(v) for k, v in params.items()}
+
+
+def run_design(args):
+    import numpy as np
+
+    from ..parameters import design
+
+    model = model_from_args(args)
+    vary = parse_vary(args.vary)
+    bounds = parse_bounds(args.bounds, vary)
+    if not 1 <= args.steps <= 1000:
+        raise CLIError(f"--steps must be in 1..1000, got {args.steps}")
+    _positive("--learning-rate", args.learning_rate)
+    if args.learning_rate > 1:
+        raise CLIError(f"--learning-rate must be at most 1, got {args.learning_rate}")
+    from ..parameters import DEFAULT_BOUNDS, parameters_of
+
+    start = parameters_of(model)
+    for name in vary:
+        lo, hi = bounds.get(name, DEFAULT_BOUNDS[name])
+        if not lo <= start[name] <= hi:
+            raise CLIError(f"--{name} = {start[name]} is outside its bounds {lo}:{hi}")
+    bar = progress(total=args.steps + 1, desc=f"design {args.objective}")
+    try:
+        res = design(args.objective, vary, model=model, bounds=bounds, steps=args.steps,
+                     learning_rate=args.learning_rate, callback=lambda h: bar.update(1))
+    except ValueError as e:
+        raise CLIError(str(e)) from None
+    finally:
+        bar.close()
+    flip = args.objective == "flip-slope"
+
+    def value(v):
+        v = math.degrees(v) if flip else v
+        return v if math.isfinite(v) else None
+
+    def grad(g):
+        return {k: (math.degrees(v) if flip else v) for k, v in g.items()}
+
+    out = {
+        "objective": args.objective,
+        "slope_deg": args.slope_deg,
+        "vary": vary,
+        "result": res.result,
+        "iterations": res.iterations,
+        "initial": {"params": _params_json(res.initial["params"]),
+                    "value": value(res.initial["value"]),
+                    "gradient": grad(res.initial["gradient"])},
+        "optimum": {"params": _params_json(res.optimum["params"]),
+                    "value": value(res.optimum["value"]),
+                    "gradient": grad(res.optimum["gradient"]),
+                    "x0": res.optimum["x0"],
+                    "multipliers": [[float(np.real(m)), float(np.imag(m))]
+                                    for m in res.optimum["multipliers"]]},
+        "history": [{"iteration": h["iteration"], "params": _params_json(h["params"]),
+                     "value": value(h["value"])} for h in res.history],
+        "projected_gradient": res.projected_gradient,
+        "units": {"value": "deg" if flip else ("m/s" if args.objective == "speed" else "-"),
+                  "gradient": "value units per parameter unit (kg, m, m/s^2)"},
+    }
+    if args.png:
+        from ..plotting import plot_design
+
+        plot_design(res, args.png, args.slope_deg)
+    if args.json:
+        print_json(out)
+    else:
+        o = out["optimum"]
+        print(f"design {args.objective} at {args.slope_deg} deg: {res.result} after "
+              f"{res.iterations} iterations")
+        print(f"  value {out['initial']['value']:.6g} -> {o['value']:.6g} "
+              f"({out['units']['value']})")
+        for k in vary:
+            print(f"  {k:>9} {out['initial']['params'][k]:.6g} -> {o['params'][k]:.6g}")
+    return 0 if res.result in ("successful", "max_iterations") else 1
+
+
+def run_atlas(args):
+    import numpy as np
+
+    from ..parameters import atlas, atlas_json
+
+    model_from_args(args, slope_deg=3.0)  # validates the model flags
+    mu = parse_values(args.mass_ratio, "--mass-ratio")
+    beta = parse_values(args.length_ratio, "--length-ratio")
+    if args.slope_deg is not None:
+        check_finite("--slope-deg", args.slope_deg)
+        if not 0 < args.slope_deg < 30:
+            raise CLIError(f"--slope-deg must be in (0, 30) degrees, got {args.slope_deg}")
+    for name in ("scan_start_deg", "scan_max_deg", "scan_step_deg"):
+        v = getattr(args, name)
+        flag = "--" + name.replace("_", "-")
+        _positive(flag, v)
+        if v >= 30:
+            raise CLIError(f"{flag} must be below 30 degrees, got {v}")
+    if args.scan_max_deg <= args.scan_start_deg:
+        raise CLIError("--scan-max-deg must be above --scan-start-deg")
+    if args.slope_deg is not None and args.slope_deg < args.scan_start_deg:
+        raise CLIError("--slope-deg must not be below --scan-start-deg")
+    at = atlas(np.asarray(mu), np.asarray(beta),
+               slope=None if args.slope_deg is None else math.radians(args.slope_deg),
+               mass_leg=args.mass_leg, leg_length=args.a + args.b, gravity=args.gravity,
+               psi_start=math.radians(args.scan_start_deg),
+               psi_max=math.radians(args.scan_max_deg),
+               step=math.radians(args.scan_step_deg))
+    rec = atlas_json(at)
+    if args.csv:
+        with open(args.csv, "w", newline="") as fh:
+            w = csv.DictWriter(fh, fieldnames=ATLAS_CSV)
+            w.writeheader()
+            for c in rec["cells"]:
+                rng = c["stable_range_deg"] or [None, None]
+                w.writerow({"mass_ratio": c["mass_ratio"], "length_ratio": c["length_ratio"],
+                            "flip_slope_deg": c["flip_slope_deg"], "stable_lo_deg": rng[0],
+                            "stable_hi_deg": rng[1], "spectral_radius": c["spectral_radius"],
+                            "reason": c.get("reason", "")})
+    if args.png:
+        from ..plotting import plot_atlas
+
+        plot_atlas(at, args.png, mass_leg=args.mass_leg, leg_length=args.a + args.b,
+                   gravity=args.gravity)
+    if args.json:
+        print_json(rec)
+    else:
+        found = sum(c["flip_slope_deg"] is not None for c in rec["cells"])
+        print(f"atlas: {len(mu)} x {len(beta)} cells, flip slope found in {found}")
+        for c in rec["cells"]:
+            f = c["flip_slope_deg"]
+            print(f"  mu {c['mass_ratio']:.4g} beta {c['length_ratio']:.4g}: "
+                  + (f"flip {f:.5f} deg" if f is not None else c.get("reason", "")))
+    return 0

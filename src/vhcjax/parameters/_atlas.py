@@ -1,0 +1,159 @@
+"""A parameter atlas of the compass gait: over a grid of mass ratio $\\mu = m_H/m$ and
+length ratio $\\beta = b/a$, the first period-doubling slope of the stable period-1 gait,
+the slope range where it is stable, and its spectral radius at a given slope
+(in the spirit of Goswami, Thuilot and Espiau, 1998).
+
+The dimensionless gait depends on $\\mu$ and $\\beta$ alone: the leg mass $m$, leg
+length $l = a + b$ and gravity $g$ only scale mass, length and time. All cells are
+solved at once: one batched `find_gaits` per slope of the scan, then a batched
+refinement of every flip (`flip_slopes`).
+"""
+
+import math
+
+import equinox as eqx
+import jax.numpy as jnp
+import numpy as np
+
+from .._results import RESULTS
+from ..gait import find_gaits
+from ..models import CompassGait
+from ._flip import _det_and_radius, _with_psi, flip_slopes
+
+
+def grid_model(mass_ratio, length_ratio, *, mass_leg=5.0, leg_length=1.0, gravity=9.81,
+               psi=math.radians(3.0)):
+    """`CompassGait` with $m_1 = m_2 = $ `mass_leg`, $m_H = \\mu m$, $a = l/(1 + \\beta)$,
+    $b = l\\beta/(1 + \\beta)$ (arrays broadcast: a batch of models)."""
+    mu = jnp.asarray(mass_ratio, float)
+    beta = jnp.asarray(length_ratio, float)
+    a = leg_length / (1.0 + beta)
+    shape = jnp.broadcast_shapes(mu.shape, beta.shape)
+    full = lambda v: jnp.broadcast_to(jnp.asarray(v, float), shape)
+    return CompassGait(m1=full(mass_leg), m2=full(mass_leg), mH=full(mu * mass_leg), a=full(a),
+                       b=full(beta * a), g=full(gravity), psi=full(psi))
+
+
+#: The stable gait of thesis Table 1 at 3 degrees (section point), the homotopy's start.
+_REFERENCE_Z = (0.2186688, -1.09238359, -0.37737395)
+_LEAVES = ("m1", "m2", "mH", "a", "b", "g", "psi")
+
+
+def seed_gaits(model, num=10):
+    """Stable gaits (section points, `(B, 3)`, NaN where lost) of a batch of models, by
+    homotopy from thesis Table 1 at 3 degrees: every parameter interpolated
+    geometrically in `num` steps, each step one batched `find_gaits` (shooting) from
+    the last step's gaits."""
+    ref = CompassGait()
+    B = int(np.shape(model.mH)[0])
+    z = np.tile(np.asarray(_REFERENCE_Z), (B, 1))
+    alive = np.ones(B, bool)
+    for s in np.linspace(0.0, 1.0, num + 1)[1:]:
+        m = model
+        for name in _LEAVES:
+            p0 = float(getattr(ref, name))
+            p1 = jnp.broadcast_to(jnp.asarray(getattr(model, name), float), (B,))
+            m = eqx.tree_at(lambda mm: getattr(mm, name), m, p0 * (p1 / p0) ** s)
+        g = find_gaits(m, jnp.asarray(z), method="shooting")
+        good = np.asarray(g.result == RESULTS.successful)
+        alive &= good
+        z = np.where(good[:, None], np.asarray(g.z), z)
+    return np.where(alive[:, None], z, np.nan)
+
+
+class Atlas(eqx.Module):
+    """The atlas over `mass_ratio` x `length_ratio` (numpy; arrays indexed `[i_mu, j_beta]`).
+
+    - `flip_slope`: first period-doubling slope (rad), NaN where none was found.
+    - `stable_range`: `(..., 2)` lowest and highest scanned slope (rad) with a stable
+      period-1 gait, the upper end refined (to the flip, or to where the spectral radius
+      reaches 1 between scan slopes: then the last stable scan slope).
+    - `spectral_radius`: at `slope` (NaN where no gait or no slope given).
+    - `reason`: per cell, why the flip is missing (`""` where found).
+    - `slope`, `psi_start`, `psi_max`, `step`: the settings (rad).
+    """
+
+    mass_ratio: np.ndarray
+    length_ratio: np.ndarray
+    flip_slope: np.ndarray
+    stable_range: np.ndarray
+    spectral_radius: np.ndarray
+    reason: list = eqx.field(static=True)
+    slope: float = eqx.field(static=True)
+    psi_start: float = eqx.field(static=True)
+    psi_max: float = eqx.field(static=True)
+    step: float = eqx.field(static=True)
+
+
+def atlas(mass_ratio, length_ratio, *, slope=None, mass_leg=5.0, leg_length=1.0,
+          gravity=9.81, psi_start=math.radians(1.0), psi_max=math.radians(12.0),
+          step=math.radians(0.5), tol=1e-10):
+    """The atlas of the stable compass gait over a grid of $\\mu$ and $\\beta$.
+
+    **Arguments:**
+
+    - `mass_ratio`, `length_ratio`: 1-d arrays ($\\mu = m_H/m$, $\\beta = b/a$).
+    - `slope`: where to report the spectral radius (rad), or `None`.
+    - `mass_leg` (kg), `leg_length` (m), `gravity` (m/s^2): the scales (they do not
+      change the slopes or the spectral radius).
+    - `psi_start`, `psi_max`, `step`: the slope scan (rad); `tol`: of the flip slopes
+      (rad). The gaits at `psi_start` are continued from the default model's (`seed_gaits`).
+
+    **Returns:** an `Atlas`.
+    """
+    mu = np.atleast_1d(np.asarray(mass_ratio, float))
+    beta = np.atleast_1d(np.asarray(length_ratio, float))
+    MU, BETA = np.meshgrid(mu, beta, indexing="ij")
+    model = grid_model(MU.ravel(), BETA.ravel(), mass_leg=mass_leg, leg_length=leg_length,
+                       gravity=gravity, psi=psi_start)
+    N = MU.size
+    # Seeds on the walker with the default scales (the homotopy from Table 1 changes mu and
+    # beta only), mapped to these scales: angles are unchanged, velocities scale with
+    # sqrt(g / l).
+    z0 = seed_gaits(grid_model(MU.ravel(), BETA.ravel(), psi=psi_start))
+    z0[:, 1:] *= math.sqrt((gravity / leg_length) / (9.81 / 1.0))
+    ok = np.isfinite(z0).all(axis=1)
+    scan = flip_slopes(model, z0, psi_start, psi_max=psi_max, step=step, tol=tol)
+    reason = [r if ok[i] else "no stable gait at the start of the scan" for i, r in enumerate(scan.reason)]
+    rho = np.full(N, np.nan)
+    if slope is not None and ok.any():
+        # continue each cell's start gait to `slope` in steps of at most `step`
+        n = max(1, int(math.ceil(abs(slope - psi_start) / step)))
+        z = np.where(ok[:, None], z0, np.nan_to_num(z0[ok][0]))
+        alive = ok.copy()
+        for s in np.linspace(psi_start, slope, n + 1)[1:]:
+            g = find_gaits(model, jnp.asarray(z), method="shooting", psi=np.full(N, s))
+            good = np.asarray(g.result == RESULTS.successful)
+            alive &= good
+            z = np.where(good[:, None], np.asarray(g.z), z)
+        _, r = _det_and_radius(_with_psi(model, np.full(N, slope)), jnp.asarray(z))
+        rho = np.where(alive, np.asarray(r), np.nan)
+    shape = MU.shape
+    return Atlas(mu, beta, scan.psi.reshape(shape), scan.stable_range.reshape(shape + (2,)),
+                 rho.reshape(shape), reason, None if slope is None else float(slope),
+                 float(psi_start), float(psi_max), float(step))
+
+
+def atlas_json(at):
+    """The atlas as a JSON-ready dict (`null` with a reason where a value is missing)."""
+    cells = []
+    for i, m in enumerate(at.mass_ratio):
+        for j, b in enumerate(at.length_ratio):
+            k = i * len(at.length_ratio) + j
+            f = at.flip_slope[i, j]
+            lo, hi = at.stable_range[i, j]
+            r = at.spectral_radius[i, j]
+            cell = {
+                "mass_ratio": float(m), "length_ratio": float(b),
+                "flip_slope_deg": float(math.degrees(f)) if np.isfinite(f) else None,
+                "stable_range_deg": ([float(math.degrees(lo)), float(math.degrees(hi))]
+                                     if np.isfinite(lo) and np.isfinite(hi) else None),
+                "spectral_radius": float(r) if np.isfinite(r) else None,
+            }
+            if not np.isfinite(f):
+                cell["reason"] = at.reason[k]
+            if at.slope is not None and not np.isfinite(r):
+                cell["spectral_radius_reason"] = "no period-1 gait found at the slope"
+            cells.append(cell)
+    return {"mass_ratio": [float(m) for m in at.mass_ratio],
+            "length_ratio": [float(b) for b in at.length_ratio], "cells": cells}

@@ -1,0 +1,205 @@
+"""The first period-doubling (flip) slope of the stable period-1 gait, batched over models,
+and its exact derivative with respect to the model parameters.
+
+$F(\\psi, p) = \\det(I + J(z^*(\\psi, p), \\psi, p))$ ($J$ the step-map Jacobian at the
+gait) changes sign where a real multiplier crosses $-1$ (as in
+`vhcjax.period_doubling_slope`). The slopes are scanned upward from a start slope with
+the gaits continued from one slope to the next (one batched `find_gaits` per slope, all
+models at once), the first sign change is bracketed, then refined by a batched
+Illinois regula falsi. At the root, $\\mathrm d\\psi_f/\\mathrm dp = -\\partial_p F /
+\\partial_\\psi F$ (implicit function theorem), with the total derivatives of $F$ through
+the implicit gait derivatives (`find_gait`) and the forward-over-forward Jacobian.
+"""
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._results import RESULTS
+from ..gait import find_gait, find_gaits
+from ..hybrid import DEFAULT_CONFIG, jacobian
+from ..solvers import detach
+from ..stability import gait_spectrum
+
+
+def _with_psi(model, psi):
+    return eqx.tree_at(lambda m: m.psi, model, jnp.asarray(psi, float))
+
+
+@eqx.filter_jit
+def _det_and_radius(model, zs):
+    """$\\det(I + J)$ and the spectral radius at the section points `zs` (batched with the
+    model's leading axis where it has one)."""
+    axes = jax.tree_util.tree_map(lambda x: 0 if (eqx.is_array(x) and jnp.ndim(x) > 0) else None, model)
+
+    def one(m, z):
+        J = jacobian(m, z, 1, DEFAULT_CONFIG)
+        return jnp.linalg.det(jnp.eye(J.shape[0]) + J), jnp.max(jnp.abs(jnp.linalg.eigvals(J)))
+
+    return eqx.filter_vmap(one, in_axes=(axes, 0))(model, zs)
+
+
+def _broadcast(model, B):
+    return jax.tree_util.tree_map(
+        lambda x: jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:]) if (eqx.is_array(x) and jnp.ndim(x) > 0) else x,
+        model,
+    )
+
+
+def _evaluate(model, psi, zs, solver="newton"):
+    """Gaits at slopes `psi` (B,) from guesses `zs` (B, 3): section points, ok, F, rho."""
+    gaits = find_gaits(model, zs, method="shooting", psi=psi, solver=solver)
+    ok = np.asarray(gaits.result == RESULTS.successful)
+    z = np.asarray(gaits.z)
+    F, rho = _det_and_radius(_with_psi(model, psi), jnp.asarray(z))
+    F, rho = np.asarray(F), np.asarray(rho)
+    return z, ok, np.where(ok, F, np.nan), np.where(ok, rho, np.nan)
+
+
+class FlipScan(eqx.Module):
+    """Result of `flip_slopes` (numpy, one entry per model of the batch).
+
+    - `psi`: the flip slope (rad), NaN where none was found in the scanned range.
+    - `z`: the period-1 gait there (section point).
+    - `stable_range`: `(B, 2)`, the lowest and highest slope (rad) of the scan where the
+      period-1 gait was found and stable (the upper end refined to the flip slope, or to
+      the slope where the spectral radius reaches 1), NaN where it never was.
+    - `found`: whether a flip was bracketed and refined.
+    - `reason`: why not, per model (`""` where found).
+    """
+
+    psi: np.ndarray
+    z: np.ndarray
+    stable_range: np.ndarray
+    found: np.ndarray
+    reason: list = eqx.field(static=True)
+
+
+def flip_slopes(model, z_start, psi_start, *, psi_max=math.radians(12.0),
+                step=math.radians(0.25), tol=1e-12, max_iter=60):
+    """First flip slope of the stable period-1 gait for each model of a batch.
+
+    **Arguments:**
+
+    - `model`: a `CompassGait`, leaves batched along a leading axis (or scalars).
+    - `z_start`: `(B, 3)` section points of the stable gait at `psi_start` (from
+      `find_gaits(..., method="shooting")`); rows that are NaN are skipped.
+    - `psi_start`: the start slope (rad), below the flip slope.
+    - `psi_max`, `step`: the scan (rad).
+    - `tol`, `max_iter`: of the refinement (rad).
+
+    **Returns:** a `FlipScan`.
+    """
+    model = detach(model)
+    z_start = np.asarray(z_start, float)
+    B = z_start.shape[0]
+    model = _broadcast(model, B)
+    alive = np.isfinite(z_start).all(axis=1)
+    z = np.where(alive[:, None], z_start, np.nan_to_num(z_start[alive][0]) if alive.any() else 0.0)
+    slopes = np.arange(psi_start, psi_max + 0.5 * step, step)
+    lo = np.full(B, np.nan)
+    hi = np.full(B, np.nan)
+    bracket = np.zeros(B, bool)
+    a = np.full(B, np.nan); fa = np.full(B, np.nan); za = z.copy()
+    b = np.full(B, np.nan); fb = np.full(B, np.nan); zb = z.copy()
+    ra = np.full(B, np.nan); rb = np.full(B, np.nan)
+    reason = ["" for _ in range(B)]
+    for psi in slopes:
+        todo = alive & ~bracket
+        if not todo.any():
+            break
+        zs, ok, F, rho = _evaluate(model, np.full(B, psi), z)
+        stable = ok & (rho < 1)
+        lo = np.where(todo & stable & np.isnan(lo), psi, lo)
+        cross = todo & ok & (F < 0) & np.isfinite(fa)
+        # the first sign change of F: bracket [previous slope, this slope]
+        b = np.where(cross, psi, b); fb = np.where(cross, F, fb); zb = np.where(cross[:, None], zs, zb)
+        rb = np.where(cross, rho, rb)
+        bracket |= cross
+        lost = todo & ~ok & ~cross
+        for i in np.nonzero(lost)[0]:
+            reason[i] = f"the period-1 gait was lost at {math.degrees(psi):.3f} deg before a flip"
+        alive &= ~lost
+        keep = todo & ok & ~cross
+        a = np.where(keep, psi, a); fa = np.where(keep, F, fa); za = np.where(keep[:, None], zs, za)
+        ra = np.where(keep, rho, ra)
+        hi = np.where(keep & stable, psi, hi)
+        z = np.where(keep[:, None], zs, z)  # continuation: the next slope starts here
+    a_bracket = a.copy()
+    for i in np.nonzero(alive & ~bracket)[0]:
+        if not reason[i]:
+            reason[i] = f"no flip below {math.degrees(psi_max):.3f} deg"
+    # batched Illinois regula falsi on the brackets
+    it = 0
+    side = np.zeros(B, int)
+    active = bracket.copy()
+    while active.any() and it < max_iter:
+        c = np.where(active, (a * fb - b * fa) / (fb - fa), a)
+        bad = ~((np.minimum(a, b) < c) & (c < np.maximum(a, b))) | (it % 4 == 3)
+        c = np.where(active & bad, 0.5 * (a + b), c)
+        w = np.clip((c - a) / np.where(b != a, b - a, 1.0), 0, 1)[:, None]
+        zc_guess = np.where(active[:, None], za + (zb - za) * w, za)
+        # Plain Newton (optimistix) here: the guesses are already very close, closer
+        # than the loose first integration of the damped search resolves.
+        zc, ok, Fc, _ = _evaluate(model, np.where(active, c, a), zc_guess, "optimistix")
+        failed = active & ~ok
+        for i in np.nonzero(failed)[0]:
+            reason[i] = "the refinement lost the gait inside the bracket"
+        active &= ~failed
+        bracket &= ~failed
+        same = active & (Fc * fb > 0)  # root between a and c
+        other = active & ~same
+        # other: root between c and b -> a <- b
+        a = np.where(other, b, a); fa = np.where(other, fb, fa); za = np.where(other[:, None], zb, za)
+        fa = np.where(same & (side == 1), 0.5 * fa, fa)
+        side = np.where(other, 0, np.where(same, 1, side))
+        b = np.where(active, c, b); fb = np.where(active, Fc, fb); zb = np.where(active[:, None], zc, zb)
+        active &= np.abs(b - a) > tol
+        it += 1
+    psi_f = np.where(bracket, b, np.nan)
+    # stable up to the flip where the last scanned slope before it was stable
+    hi = np.where(bracket & (hi == a_bracket), psi_f, hi)
+    rng = np.stack([lo, np.where(np.isfinite(lo), hi, np.nan)], axis=1)
+    zf = np.where(bracket[:, None], zb, np.nan)
+    return FlipScan(psi_f, zf, rng, bracket, reason)
+
+
+def _flip_function(model, psi, z):
+    """$F(\\psi, p) = \\det(I + J)$ at the gait found from `z` (differentiable)."""
+    m = _with_psi(model, psi)
+    g = find_gait(m, method="shooting", guess=z, throw=False)
+    J = gait_spectrum(m, g).jacobian
+    return jnp.linalg.det(jnp.eye(J.shape[0]) + J)
+
+
+def flip_slope(model, z_start, *, psi_max=math.radians(12.0), step=math.radians(0.25)):
+    """The first flip slope (rad) of the stable gait of one `model`, starting from its
+    gait `z_start` (section point) at `model.psi`; differentiable with respect to the
+    model parameters (`jax.grad`, `jax.jvp`, ...) by the implicit function theorem on
+    $\\det(I + J) = 0$. Locating it runs on the host (not under `jit`). NaN where no flip
+    was found below `psi_max`."""
+    params = model
+    m = detach(model)
+    scan = flip_slopes(m, np.asarray(z_start, float)[None], float(m.psi), psi_max=psi_max, step=step)
+    psi_f, z_f = float(scan.psi[0]), scan.z[0]
+    return _attach_flip(params, jnp.asarray(psi_f), jnp.asarray(z_f))
+
+
+@jax.custom_jvp
+def _attach_flip(model, psi_f, z_f):
+    return psi_f
+
+
+@_attach_flip.defjvp
+def _attach_flip_jvp(primals, tangents):
+    model, psi_f, z_f = primals
+    dmodel = tangents[0]
+    # dF = F_psi dpsi + F_p . dp = 0 on the flip curve
+    F_psi = jax.jvp(lambda s: _flip_function(model, s, z_f), (psi_f,), (jnp.ones_like(psi_f),))[1]
+    dmodel = eqx.tree_at(lambda m: m.psi, dmodel, jnp.zeros_like(psi_f))
+    F_p = jax.jvp(lambda m: _flip_function(m, psi_f, z_f), (model,), (dmodel,))[1]
+    dpsi = jnp.where(jnp.isfinite(psi_f), -F_p / F_psi, 0.0)
+    return psi_f, dpsi

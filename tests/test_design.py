@@ -1,0 +1,97 @@
+"""Flip-slope derivatives against finite differences of located flips; a design re-solved
+from scratch, its projected gradient, and a brute-force grid; atlas cells against
+`period_doubling_slope` and the mass/length/time scaling invariance."""
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+import vhcjax as vj
+from vhcjax.parameters._design import with_parameters
+
+
+def _stable_z(model):
+    return np.asarray(vj.find_gait(model, method="shooting").z)
+
+
+def test_flip_slope_derivative_vs_located_flips():
+    m0 = vj.CompassGait()
+    z0 = _stable_z(m0)
+
+    def flip(mH):
+        return vj.flip_slope(eqx.tree_at(lambda m: m.mH, m0, mH), z0)
+
+    d = float(jax.grad(flip)(10.0))
+    # Richardson-extrapolated central differences of flips located by `flip_slopes`
+    def located(mH):
+        m = eqx.tree_at(lambda m: m.mH, m0, jnp.asarray(mH))
+        return float(vj.flip_slopes(m, z0[None], float(m0.psi)).psi[0])
+
+    def central(h):
+        return (located(10.0 + h) - located(10.0 - h)) / (2 * h)
+
+    fd = (4 * central(0.01) - central(0.02)) / 3
+    assert abs(d - fd) < 1e-6 * abs(fd), (d, fd)
+    # the located flip is the one of the existing bisection on det(I + J)
+    pd = vj.period_doubling_slope(math.radians(4.0), math.radians(4.8), z0, model=m0,
+                                  tol=1e-12)
+    assert abs(math.degrees(float(flip(10.0)) - pd.psi)) < 1e-8
+
+
+def test_design_spectral_radius():
+    m0 = vj.CompassGait()
+    bounds = {"mass-hip": (6.0, 20.0)}
+    res = vj.design("spectral-radius", ["mass-hip"], model=m0, bounds=bounds, steps=25,
+                    learning_rate=0.1)
+    assert res.result in ("successful", "max_iterations")
+    assert res.optimum["value"] < res.initial["value"]
+    # re-solved from scratch (continuation from Table 1, no guess) gives the same value
+    best = res.model
+    g = vj.find_gait(best, method="shooting")
+    rho = float(vj.gait_spectrum(best, g).spectral_radius)
+    assert abs(rho - res.optimum["value"]) < 1e-9
+    # projected gradient ~ 0 (relative to the gradient's scale at the start)
+    scale = abs(res.initial["gradient"]["mass-hip"]) * 14.0
+    assert res.projected_gradient < 2e-2 * scale, (res.projected_gradient, scale)
+    # brute force: a batched grid over the same interval finds nothing better
+    grid = np.linspace(6.0, 20.0, 57)
+    zs = np.tile(np.asarray(g.z), (len(grid), 1))
+    model = with_parameters(m0, ["mass-hip"], [jnp.asarray(grid)])
+    gs = vj.find_gaits(model, jnp.asarray(zs), method="shooting")
+    ok = np.asarray(gs.result == vj.RESULTS.successful)
+    rhos = np.asarray(vj.gait_spectrum(model, gs).spectral_radius)[ok]
+    assert ok.sum() > 40
+    assert rhos.min() > res.optimum["value"] - 1e-4, (rhos.min(), res.optimum["value"])
+
+
+def test_atlas_against_bifurcation_and_scaling():
+    mu, beta = np.array([1.5, 2.0]), np.array([0.9, 1.0])
+    at = vj.atlas(mu, beta, slope=math.radians(3.0))
+    assert np.isfinite(at.flip_slope).all()
+    # cells against the existing bisection on det(I + J) for the same model
+    from vhcjax.parameters._atlas import grid_model
+
+    for i, j in ((0, 0), (1, 1)):
+        m = grid_model(mu[i], beta[j], psi=math.radians(3.0))
+        z = _stable_z(m)
+        f = at.flip_slope[i, j]
+        pd = vj.period_doubling_slope(math.radians(3.0), f + math.radians(0.2), z, model=m,
+                                      tol=1e-12)
+        assert abs(math.degrees(f - pd.psi)) < 1e-4
+        gm = vj.gait_spectrum(m, vj.find_gait(m, method="shooting", guess=z))
+        assert abs(float(gm.spectral_radius) - at.spectral_radius[i, j]) < 1e-8
+        lo, hi = at.stable_range[i, j]
+        assert lo <= math.radians(3.0) < hi and abs(hi - f) < 1e-12
+    # Table 1 is mu = 2, beta = 1: its flip is the thesis model's
+    pd = vj.period_doubling_slope(math.radians(4.0), math.radians(4.8),
+                                  _stable_z(vj.CompassGait()), tol=1e-12)
+    assert abs(math.degrees(at.flip_slope[1, 1] - pd.psi)) < 1e-4
+    # scaling invariance: other leg mass, leg length and gravity, same dimensionless walker
+    scaled = vj.atlas(mu, beta, slope=math.radians(3.0), mass_leg=2.0, leg_length=1.7,
+                      gravity=3.7)
+    np.testing.assert_allclose(np.degrees(scaled.flip_slope), np.degrees(at.flip_slope),
+                               atol=1e-6)
+    np.testing.assert_allclose(scaled.spectral_radius, at.spectral_radius, atol=1e-8)
