@@ -109,7 +109,7 @@ for name, (model, z) in cases.items():
                  "offsets_y": np.asarray(bc.offsets_y), "closed": np.asarray(bc.converged),
                  "passive": np.asarray(bp.converged)}
     fname = os.path.join(OUT, "06_" + name.replace(" ", "_") + ".png")
-    vj.control.plot_stabilization(fname, f"Compass gait, {name} gait, hip-torque LQR",
+    vj.plotting.plot_stabilization(fname, f"Compass gait, {name} gait, hip-torque LQR",
                                   np.asarray(st.system.s), np.asarray(st.riccati.K),
                                   errors[name][0], errors[name][1], basin)
     print("wrote", fname)

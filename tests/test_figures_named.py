@@ -99,8 +99,13 @@ FIGURES = {
 }
 
 
+#: Figures of the control and parameter studies: drawn from real results by the tests of
+#: `vhcjax stabilize` and `vhcjax design` / `vhcjax atlas` (PNG written, checked there).
+TESTED_ELSEWHERE = {"plot_walker", "plot_stabilization", "plot_design", "plot_atlas"}
+
+
 def test_every_public_figure_function_is_covered():
-    public = {n for n in dir(P) if n.startswith("plot_")} - {"plot_walker"}
+    public = {n for n in dir(P) if n.startswith("plot_")} - TESTED_ELSEWHERE
     assert public == set(FIGURES)
 
 

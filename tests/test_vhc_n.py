@@ -107,7 +107,7 @@ def test_pendulum_walker_walks_100_steps(pw, pw_gait):
 def test_n_dof_vhc_search_reproduces_two_dof_problem_1():
     """On the compass gait the n-DOF search (unknowns z, integration in theta) and the
     thesis Problem 1 solver (`_gait.vhc_search`, unknowns (a, b)) give the same gait."""
-    from vhcjax.gait._search import vhc_search
+    from vhcjax.gait import vhc_search
 
     cg = vhcjax.CompassGait()
     g_n = eqx.filter_jit(vhc_gait_search)(cg, jnp.array([0.21, -1.1, -0.37]))

@@ -157,8 +157,7 @@ def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-
     transverse linearization (thesis 6.21, 6.30, 6.38) plus the input term
     $L(t_s) B(t_s)$. Needs the `vhcjax.stability` module.
     """
-    # The defining module: the package does not export `_joint_vector_field`, `_split`.
-    from ..stability import _transverse as tr
+    from .. import stability as tr
     n = model.n_dof
     k = n - 1
     r = 2 * k + 1
@@ -169,14 +168,14 @@ def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-
                           jnp.eye(r, dtype=x_star.dtype).reshape(-1)])
     ts = jnp.asarray(phases, dtype=float) * lin.period
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(tr._joint_vector_field), diffrax.Tsit5(), t0=0.0,
+        diffrax.ODETerm(tr.joint_vector_field), diffrax.Tsit5(), t0=0.0,
         t1=lin.period, dt0=None, y0=u0, args=(model, E0), saveat=diffrax.SaveAt(ts=ts),
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol), max_steps=4096,
         throw=False,
     )
 
     def one(u):
-        theta, dtheta, phi, dphi = tr._split(model, u)
+        theta, dtheta, phi, dphi = tr.split_orbit_state(model, u)
         Phi_s = u[2 + 2 * k :].reshape(r, r)
         x = tr.orbit_state(theta, dtheta, phi, dphi)
         q = x[:n]

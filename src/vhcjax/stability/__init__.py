@@ -36,6 +36,8 @@ from ._multipliers import (
 )
 
 from ._transverse import (
+    joint_vector_field as joint_vector_field,
+    split_orbit_state as split_orbit_state,
     flow_projection as flow_projection,
     g_h as g_h,
     guard_normal as guard_normal,

@@ -212,19 +212,19 @@ def _cosine(m, normal):
     return jnp.abs(jnp.dot(m, normal)) / (jnp.linalg.norm(m) * jnp.linalg.norm(normal))
 
 
-def _split(model, u):
+def split_orbit_state(model, u):
     k = model.n_dof - 1
     theta, dtheta = u[0], u[1]
     phi, dphi = u[2 : 2 + k], u[2 + k : 2 + 2 * k]
     return theta, dtheta, phi, dphi
 
 
-def _joint_vector_field(t, u, args):
+def joint_vector_field(t, u, args):
     """$\\theta, \\dot\\theta$ by (6.10); $\\phi, \\phi'$ by (5.19) in $t$; $\\dot\\Phi = A\\Phi$."""
     model, E0 = args
     k = model.n_dof - 1
     r = 2 * k + 1
-    theta, dtheta, phi, dphi = _split(model, u)
+    theta, dtheta, phi, dphi = split_orbit_state(model, u)
     Phi = u[2 + 2 * k :].reshape(r, r)
     ddphi = phi_second_derivative(model, E0, theta, phi, dphi)[0]
     a0, b0, c0 = theta_dynamics_coefficients(model, theta, phi, dphi)
@@ -237,7 +237,7 @@ def _joint_vector_field(t, u, args):
 
 # diffrax traces the field five times (initial step, solver state, step); jitted, the
 # later traces reuse the first one's jaxpr.
-_joint_vector_field_jit = eqx.filter_jit(_joint_vector_field)
+_joint_vector_field_jit = eqx.filter_jit(joint_vector_field)
 
 
 def transverse_linearization(model, x_plus, x_minus, period, *, rtol=1e-11, atol=1e-11,
@@ -294,7 +294,7 @@ def transverse_linearization(model, x_plus, x_minus, period, *, rtol=1e-11, atol
                                     RESULTS.max_steps_reached, RESULTS.nonfinite)),
     )
     Phi_T = uT[2 + 2 * k :].reshape(r, r)
-    thT, dthT, phT, dphT = _split(model, uT)
+    thT, dthT, phT, dphT = split_orbit_state(model, uT)
     xm = orbit_state(thT, dthT, phT, dphT)
 
     # Discrete part: (6.23), (6.25), (6.27), (6.30), (6.31), (6.35), (6.36).
