@@ -40,10 +40,15 @@ def main(argv=None):
     t0 = time.perf_counter()
     at = vj.atlas(mu, beta, slope=math.radians(3.0))
     first = time.perf_counter() - t0
-    out = {"grid": [args.n, args.n], "cells": args.n**2, "first_call_s": first,
-           "found": int(np.isfinite(at.flip_slope).sum()),
-           "device": str(jax.devices()[0]), "cpu_count": __import__("os").cpu_count(),
-           "platform": platform.platform()}
+    out = {
+        "grid": [args.n, args.n],
+        "cells": args.n**2,
+        "first_call_s": first,
+        "found": int(np.isfinite(at.flip_slope).sum()),
+        "device": str(jax.devices()[0]),
+        "cpu_count": __import__("os").cpu_count(),
+        "platform": platform.platform(),
+    }
     print(json.dumps(out), flush=True)
     if args.repeat:
         t0 = time.perf_counter()

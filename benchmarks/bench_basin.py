@@ -65,9 +65,9 @@ def main(argv=None):
     import jax.numpy as jnp
 
     import vhcjax as vj
-    from vhcjax.robustness._basin import _recover_chunk
-    from vhcjax.hybrid._simulate import SolverConfig
     from vhcjax.hybrid._poincare import fixed_point
+    from vhcjax.hybrid._simulate import SolverConfig
+    from vhcjax.robustness._basin import _recover_chunk
 
     model = vj.CompassGait()
     fp = eqx.filter_jit(fixed_point)(model, jnp.asarray(SEED))
@@ -78,14 +78,29 @@ def main(argv=None):
 
     # compile once on a chunk of gait points (decided at once: no simulation cost)
     t0 = time.perf_counter()
-    jax.block_until_ready(_recover_chunk(model, jnp.asarray(np.repeat(z_star[None], args.chunk,
-                                                                      0)),
-                                         jnp.asarray(z_star), args.steps, 1e-4, cfg))
+    jax.block_until_ready(
+        _recover_chunk(
+            model,
+            jnp.asarray(np.repeat(z_star[None], args.chunk, 0)),
+            jnp.asarray(z_star),
+            args.steps,
+            1e-4,
+            cfg,
+        )
+    )
     compile_s = time.perf_counter() - t0
 
     t0 = time.perf_counter()
-    b = vj.basin_slice(model, z_star, axes=(0, 1), half_widths=hw, shape=(args.grid, args.grid),
-                       num_steps=args.steps, chunk=args.chunk, config=cfg)
+    b = vj.basin_slice(
+        model,
+        z_star,
+        axes=(0, 1),
+        half_widths=hw,
+        shape=(args.grid, args.grid),
+        num_steps=args.steps,
+        chunk=args.chunk,
+        config=cfg,
+    )
     run_s = time.perf_counter() - t0
     taken = np.where(b.label >= 2, args.steps, np.maximum(b.steps, 0))
     walker_steps = int(taken.sum())
@@ -108,22 +123,40 @@ def main(argv=None):
     sp_s = time.perf_counter() - t0
     sp_rate = sp_steps / sp_s if sp_s > 0 else float("nan")
     out = {
-        "benchmark": "basin_slice", "grid": [args.grid, args.grid], "max_steps": args.steps,
-        "chunk": args.chunk, "rtol": args.rtol, "device": str(jax.devices()[0]),
-        "cpu_count": os.cpu_count(), "platform": platform.platform(),
-        "vhcjax": {"compile_s": compile_s, "run_s": run_s, "walker_steps": walker_steps,
-                   "walker_steps_per_s": walker_steps / run_s,
-                   "points_per_s": args.grid**2 / run_s, "fraction_converging": b.fraction},
-        "scipy": {"points": int(args.scipy_points), "walker_steps": sp_steps, "run_s": sp_s,
-                  "walker_steps_per_s": sp_rate,
-                  "estimated_full_grid_s": walker_steps / sp_rate if sp_rate > 0 else None,
-                  "label_agreement": agree / args.scipy_points},
+        "benchmark": "basin_slice",
+        "grid": [args.grid, args.grid],
+        "max_steps": args.steps,
+        "chunk": args.chunk,
+        "rtol": args.rtol,
+        "device": str(jax.devices()[0]),
+        "cpu_count": os.cpu_count(),
+        "platform": platform.platform(),
+        "vhcjax": {
+            "compile_s": compile_s,
+            "run_s": run_s,
+            "walker_steps": walker_steps,
+            "walker_steps_per_s": walker_steps / run_s,
+            "points_per_s": args.grid**2 / run_s,
+            "fraction_converging": b.fraction,
+        },
+        "scipy": {
+            "points": int(args.scipy_points),
+            "walker_steps": sp_steps,
+            "run_s": sp_s,
+            "walker_steps_per_s": sp_rate,
+            "estimated_full_grid_s": walker_steps / sp_rate if sp_rate > 0 else None,
+            "label_agreement": agree / args.scipy_points,
+        },
     }
     out["speedup"] = out["vhcjax"]["walker_steps_per_s"] / sp_rate
-    print(f"vhcjax: {args.grid}x{args.grid} slice, {walker_steps} walker-steps in {run_s:.1f} s "
-          f"({walker_steps / run_s:,.0f} walker-steps/s; compile {compile_s:.1f} s)")
-    print(f"scipy:  {sp_rate:,.0f} walker-steps/s on {args.scipy_points} points -> full grid "
-          f"~{walker_steps / sp_rate:.0f} s; labels agree on {agree}/{args.scipy_points}")
+    print(
+        f"vhcjax: {args.grid}x{args.grid} slice, {walker_steps} walker-steps in {run_s:.1f} s "
+        f"({walker_steps / run_s:,.0f} walker-steps/s; compile {compile_s:.1f} s)"
+    )
+    print(
+        f"scipy:  {sp_rate:,.0f} walker-steps/s on {args.scipy_points} points -> full grid "
+        f"~{walker_steps / sp_rate:.0f} s; labels agree on {agree}/{args.scipy_points}"
+    )
     print(f"speedup {out['speedup']:.1f}x")
     if args.json:
         with open(args.json, "w") as f:

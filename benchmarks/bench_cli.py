@@ -17,7 +17,6 @@ the same jobs in the same run.
 
 import argparse
 import json
-import math
 import os
 import platform
 import shutil
@@ -86,7 +85,9 @@ def _timed(cmd, env, cwd):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--quick", action="store_true", help="small sweeps (a check, not a measurement)")
+    ap.add_argument(
+        "--quick", action="store_true", help="small sweeps (a check, not a measurement)"
+    )
     ap.add_argument("--json", metavar="OUT")
     args = ap.parse_args(argv)
     n1, n2 = (100, 400) if args.quick else (1000, 10000)
@@ -100,10 +101,14 @@ def main(argv=None):
     first, _ = _timed(vhcjax + ["gait", "--slope-deg", "3", "--json", "--quiet"], env, work)
     second, _ = _timed(vhcjax + ["gait", "--slope-deg", "3", "--json", "--quiet"], env, work)
     sp, _ = _timed([sys.executable, "-c", SCIPY_GAIT.format(here=HERE)], env, work)
-    rows["gait"] = dict(first_s=first, second_s=second, scipy_s=sp,
-                        first_ratio=first / sp, second_ratio=second / sp)
-    print(f"gait --json: first {first:.1f} s, second {second:.1f} s, scipy {sp:.2f} s "
-          f"({first / sp:.0f}x, {second / sp:.1f}x)", flush=True)
+    rows["gait"] = dict(
+        first_s=first, second_s=second, scipy_s=sp, first_ratio=first / sp, second_ratio=second / sp
+    )
+    print(
+        f"gait --json: first {first:.1f} s, second {second:.1f} s, scipy {sp:.2f} s "
+        f"({first / sp:.0f}x, {second / sp:.1f}x)",
+        flush=True,
+    )
 
     # library: a fresh Python process, warm cache
     lib, out = _timed([sys.executable, "-c", LIBRARY_FIRST], env, work)
@@ -114,8 +119,21 @@ def main(argv=None):
     def sweep(n, cache_env):
         step = (4.3 - 0.5) / (n - 1)
         csv = os.path.join(work, f"sweep{n}.csv")
-        t, _ = _timed(vhcjax + ["sweep", "--slope-deg", f"0.5:4.3:{step!r}", "--family",
-                                "stable", "--csv", csv, "--quiet"], cache_env, work)
+        t, _ = _timed(
+            vhcjax
+            + [
+                "sweep",
+                "--slope-deg",
+                f"0.5:4.3:{step!r}",
+                "--family",
+                "stable",
+                "--csv",
+                csv,
+                "--quiet",
+            ],
+            cache_env,
+            work,
+        )
         with open(csv) as fh:
             found = sum(1 for line in fh if ",successful," in line)
         return t, found
@@ -128,18 +146,35 @@ def main(argv=None):
     t2, f2 = sweep(n2, env)
     per_gait = (t2 - t1) / (n2 - n1)
     fixed = t1 - n1 * per_gait
-    sp_out = subprocess.run([sys.executable, "-c", SCIPY_SWEEP.format(here=HERE, n=n_scipy)],
-                            capture_output=True, text=True, check=True).stdout
+    sp_out = subprocess.run(
+        [sys.executable, "-c", SCIPY_SWEEP.format(here=HERE, n=n_scipy)],
+        capture_output=True,
+        text=True,
+        check=True,
+    ).stdout
     sp_t, sp_found = eval(sp_out.strip())  # noqa: S307 (our own script's tuple)
     sp_per_gait = sp_t / n_scipy
-    rows["sweep"] = dict(n1=n1, n2=n2, t1_s=t1, t2_s=t2, found1=f1, found2=f2,
-                         per_gait_ms=1e3 * per_gait, fixed_s=fixed, cold_n1_s=cold,
-                         cold_fixed_s=cold - n1 * per_gait, scipy_per_gait_ms=1e3 * sp_per_gait,
-                         scipy_found=sp_found, ratio=sp_per_gait / per_gait)
-    print(f"sweep: {n1} slopes {t1:.1f} s ({f1} found), {n2} slopes {t2:.1f} s ({f2} found): "
-          f"{1e3 * per_gait:.2f} ms/gait, fixed {fixed:.1f} s (empty cache {cold:.1f} s at "
-          f"{n1}); scipy {1e3 * sp_per_gait:.1f} ms/gait: {sp_per_gait / per_gait:.0f}x",
-          flush=True)
+    rows["sweep"] = dict(
+        n1=n1,
+        n2=n2,
+        t1_s=t1,
+        t2_s=t2,
+        found1=f1,
+        found2=f2,
+        per_gait_ms=1e3 * per_gait,
+        fixed_s=fixed,
+        cold_n1_s=cold,
+        cold_fixed_s=cold - n1 * per_gait,
+        scipy_per_gait_ms=1e3 * sp_per_gait,
+        scipy_found=sp_found,
+        ratio=sp_per_gait / per_gait,
+    )
+    print(
+        f"sweep: {n1} slopes {t1:.1f} s ({f1} found), {n2} slopes {t2:.1f} s ({f2} found): "
+        f"{1e3 * per_gait:.2f} ms/gait, fixed {fixed:.1f} s (empty cache {cold:.1f} s at "
+        f"{n1}); scipy {1e3 * sp_per_gait:.1f} ms/gait: {sp_per_gait / per_gait:.0f}x",
+        flush=True,
+    )
 
     # other commands, second runs
     others = {

@@ -36,16 +36,26 @@ def main(argv=None):
     ap.add_argument("--scipy-max", type=int, default=20, help="members solved by scipy (20)")
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--quick", action="store_true", help="B = 1, 10 only; 3 scipy members")
-    ap.add_argument("--cpu-devices", type=int, default=1,
-                    help="split each batch over this many CPU devices (XLA host devices)")
-    ap.add_argument("--scipy-procs", type=int, default=1,
-                    help="also time scipy on this many processes at once (its members "
-                         "split over a process pool), for a same-cores comparison")
+    ap.add_argument(
+        "--cpu-devices",
+        type=int,
+        default=1,
+        help="split each batch over this many CPU devices (XLA host devices)",
+    )
+    ap.add_argument(
+        "--scipy-procs",
+        type=int,
+        default=1,
+        help="also time scipy on this many processes at once (its members "
+        "split over a process pool), for a same-cores comparison",
+    )
     ap.add_argument("--json", metavar="OUT")
     args = ap.parse_args(argv)
     if args.cpu_devices > 1:  # must be set before JAX starts its CPU backend
-        os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") +
-                                   f" --xla_force_host_platform_device_count={args.cpu_devices}")
+        os.environ["XLA_FLAGS"] = (
+            os.environ.get("XLA_FLAGS", "")
+            + f" --xla_force_host_platform_device_count={args.cpu_devices}"
+        )
     # Compile times are those of a first run: without the persistent compilation cache.
     os.environ["VHCJAX_CACHE_DIR"] = "off"
     if args.quick:
@@ -56,6 +66,7 @@ def main(argv=None):
 
     import vhcjax as vj
     from vhcjax import gait as G
+
     sizes = [int(s) for s in args.sizes.split(",")]
     pool = None
     if args.scipy_procs > 1:  # started (and scipy imported) before any timing
@@ -71,8 +82,12 @@ def main(argv=None):
             psi = np.radians(deg)
             seeds = np.tile([0.20, -1.0], (B, 1))
             if method == "shooting":
-                seeds = np.stack([np.asarray(G.complete_guess(vj.CompassGait(psi=p), s, "stable"))
-                                  for p, s in zip(psi[:1], seeds[:1])])
+                seeds = np.stack(
+                    [
+                        np.asarray(G.complete_guess(vj.CompassGait(psi=p), s, "stable"))
+                        for p, s in zip(psi[:1], seeds[:1])
+                    ]
+                )
                 seeds = np.tile(seeds[0], (B, 1))
 
             def run():
@@ -116,30 +131,50 @@ def main(argv=None):
                 pool.starmap(_scipy_one, [(method, float(psi[i]), seeds[i]) for i in range(n_sp)])
                 t_sp_pool = (time.perf_counter() - t0) / n_sp
             row = dict(
-                method=method, B=B, jax_s=t_run, jax_gaits_per_s=B / t_run,
-                compile_s=max(first - t_run, 0.0), jax_success=float(ok.mean()),
-                scipy_s_per_gait=t_sp, scipy_gaits_per_s=1.0 / t_sp,
-                scipy_success=float(np.mean(sp_ok)), ratio=(B / t_run) * t_sp,
+                method=method,
+                B=B,
+                jax_s=t_run,
+                jax_gaits_per_s=B / t_run,
+                compile_s=max(first - t_run, 0.0),
+                jax_success=float(ok.mean()),
+                scipy_s_per_gait=t_sp,
+                scipy_gaits_per_s=1.0 / t_sp,
+                scipy_success=float(np.mean(sp_ok)),
+                ratio=(B / t_run) * t_sp,
                 max_diff_vs_scipy=max(agree) if agree else None,
             )
             if t_sp_pool is not None:
-                row.update(scipy_procs=args.scipy_procs, scipy_pool_gaits_per_s=1.0 / t_sp_pool,
-                           ratio_vs_pool=(B / t_run) * t_sp_pool)
+                row.update(
+                    scipy_procs=args.scipy_procs,
+                    scipy_pool_gaits_per_s=1.0 / t_sp_pool,
+                    ratio_vs_pool=(B / t_run) * t_sp_pool,
+                )
             rows.append(row)
-            print(f"{method:8s} B={B:5d}  vhcjax {row['jax_gaits_per_s']:9.1f} gaits/s "
-                  f"(compile {row['compile_s']:6.1f} s, success {row['jax_success']:.3f})  "
-                  f"scipy {row['scipy_gaits_per_s']:7.2f} gaits/s (success "
-                  f"{row['scipy_success']:.2f})  ratio {row['ratio']:8.1f}  "
-                  f"max |diff| {row['max_diff_vs_scipy']}", flush=True)
+            print(
+                f"{method:8s} B={B:5d}  vhcjax {row['jax_gaits_per_s']:9.1f} gaits/s "
+                f"(compile {row['compile_s']:6.1f} s, success {row['jax_success']:.3f})  "
+                f"scipy {row['scipy_gaits_per_s']:7.2f} gaits/s (success "
+                f"{row['scipy_success']:.2f})  ratio {row['ratio']:8.1f}  "
+                f"max |diff| {row['max_diff_vs_scipy']}",
+                flush=True,
+            )
             if t_sp_pool is not None:
-                print(f"{'':8s}          scipy on {args.scipy_procs} processes "
-                      f"{row['scipy_pool_gaits_per_s']:7.2f} gaits/s  ratio "
-                      f"{row['ratio_vs_pool']:8.1f}", flush=True)
+                print(
+                    f"{'':8s}          scipy on {args.scipy_procs} processes "
+                    f"{row['scipy_pool_gaits_per_s']:7.2f} gaits/s  ratio "
+                    f"{row['ratio_vs_pool']:8.1f}",
+                    flush=True,
+                )
     if pool is not None:
         pool.close()
 
-    info = dict(device=str(jax.devices()[0]), num_devices=len(jax.devices()), cpus=os.cpu_count(),
-                python=platform.python_version(), jax=jax.__version__)
+    info = dict(
+        device=str(jax.devices()[0]),
+        num_devices=len(jax.devices()),
+        cpus=os.cpu_count(),
+        python=platform.python_version(),
+        jax=jax.__version__,
+    )
     if args.json:
         with open(args.json, "w") as fh:
             json.dump(dict(info=info, rows=rows), fh, indent=1)

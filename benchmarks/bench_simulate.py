@@ -40,8 +40,12 @@ def main(argv=None):
     ap.add_argument("--scipy-walkers", type=int, default=30, help="walkers run by scipy (30)")
     ap.add_argument("--repeats", type=int, default=3)
     ap.add_argument("--spread", type=float, default=0.02, help="random start spread (0.02)")
-    ap.add_argument("--cpu-devices", type=int, default=1,
-                    help="split the batch over this many CPU devices (XLA host devices)")
+    ap.add_argument(
+        "--cpu-devices",
+        type=int,
+        default=1,
+        help="split the batch over this many CPU devices (XLA host devices)",
+    )
     ap.add_argument("--quick", action="store_true", help="small sizes (N=64, K=3)")
     ap.add_argument("--json", metavar="OUT", help="write the results as JSON")
     args = ap.parse_args(argv)
@@ -49,8 +53,10 @@ def main(argv=None):
         args.walkers, args.steps, args.scipy_walkers, args.repeats = 64, 3, 5, 1
 
     if args.cpu_devices > 1:  # must be set before JAX starts its CPU backend
-        os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") +
-                                   f" --xla_force_host_platform_device_count={args.cpu_devices}")
+        os.environ["XLA_FLAGS"] = (
+            os.environ.get("XLA_FLAGS", "")
+            + f" --xla_force_host_platform_device_count={args.cpu_devices}"
+        )
     import jax
     import jax.numpy as jnp
 
@@ -63,8 +69,9 @@ def main(argv=None):
     x0 = np.stack([zs[:, 0], -zs[:, 0] - 2 * psi, zs[:, 1], zs[:, 2]], axis=1)
 
     model = vj.CompassGait(psi=psi)
-    config = vj.SolverConfig(rtol=args.rtol, atol=args.rtol, max_steps=args.max_steps,
-                             solver=args.solver)
+    config = vj.SolverConfig(
+        rtol=args.rtol, atol=args.rtol, max_steps=args.max_steps, solver=args.solver
+    )
     X = jnp.asarray(x0)
 
     t = time.perf_counter()
@@ -86,12 +93,15 @@ def main(argv=None):
     t = time.perf_counter()
     sc_steps, max_dT = 0, 0.0
     for i in range(nsc):
-        out = ref.simulate(par, x0[i], args.steps, rtol=args.rtol, atol=args.rtol,
-                           method=args.scipy_method)
+        out = ref.simulate(
+            par, x0[i], args.steps, rtol=args.rtol, atol=args.rtol, method=args.scipy_method
+        )
         good = [s for s in out if s.ok]
         sc_steps += len(good)
         if good and len(good) == int(ok[i]):
-            dT = np.abs(np.array([s.period for s in good]) - np.asarray(sim.steps.period[i, :len(good)]))
+            dT = np.abs(
+                np.array([s.period for s in good]) - np.asarray(sim.steps.period[i, : len(good)])
+            )
             max_dT = max(max_dT, float(dT.max()))
     sc_s = time.perf_counter() - t
     sc_rate = sc_steps / sc_s
@@ -101,22 +111,31 @@ def main(argv=None):
         "num_devices": len(jax.devices()),
         "platform": platform.processor() or platform.machine(),
         "cpu_count": os.cpu_count(),
-        "walkers": args.walkers, "steps": args.steps, "rtol": args.rtol,
-        "solver": args.solver, "scipy_method": args.scipy_method,
-        "compile_s": compile_s, "run_s": run_s,
+        "walkers": args.walkers,
+        "steps": args.steps,
+        "rtol": args.rtol,
+        "solver": args.solver,
+        "scipy_method": args.scipy_method,
+        "compile_s": compile_s,
+        "run_s": run_s,
         "success_rate": float(np.mean(ok == args.steps)),
         "vhcjax_walker_steps_per_s": jax_rate,
-        "scipy_walkers": nsc, "scipy_s": sc_s,
+        "scipy_walkers": nsc,
+        "scipy_s": sc_s,
         "scipy_walker_steps_per_s": sc_rate,
         "speedup": jax_rate / sc_rate,
         "max_period_difference_s": max_dT,
     }
-    print(f"vhcjax  {args.walkers} walkers x {args.steps} steps on {len(jax.devices())} "
-          f"{jax.devices()[0].platform} device(s) ({args.solver}, rtol=atol="
-          f"{args.rtol:g}): {run_s:.3f} s, {jax_rate:,.0f} walker-steps/s "
-          f"(compile {compile_s:.1f} s, success {res['success_rate']:.1%})")
-    print(f"scipy   {nsc} walkers x {args.steps} steps ({args.scipy_method}): {sc_s:.3f} s, "
-          f"{sc_rate:,.0f} walker-steps/s")
+    print(
+        f"vhcjax  {args.walkers} walkers x {args.steps} steps on {len(jax.devices())} "
+        f"{jax.devices()[0].platform} device(s) ({args.solver}, rtol=atol="
+        f"{args.rtol:g}): {run_s:.3f} s, {jax_rate:,.0f} walker-steps/s "
+        f"(compile {compile_s:.1f} s, success {res['success_rate']:.1%})"
+    )
+    print(
+        f"scipy   {nsc} walkers x {args.steps} steps ({args.scipy_method}): {sc_s:.3f} s, "
+        f"{sc_rate:,.0f} walker-steps/s"
+    )
     print(f"speedup {res['speedup']:.1f}x   max |period difference| {max_dT:.2e} s")
     if args.json:
         with open(args.json, "w") as f:

@@ -65,6 +65,7 @@ def main(argv=None):
 
     from vhcjax import CompassGait
     from vhcjax.stability import _multipliers as S
+
     psis = np.radians(np.linspace(args.lo, args.hi, args.slopes))
     t0 = time.perf_counter()
     fam = S.period1_family(psis, "stable")
@@ -112,8 +113,11 @@ def main(argv=None):
         "max_diff_transverse_vs_poincare": diff_tp,
         "max_diff_vhcjax_vs_scipy_fd": diff_sc,
         "num_unstable": int((~np.asarray(out.stable)).sum()),
-        "first_unstable_slope_deg": (float(np.degrees(psis[~np.asarray(out.stable)][0]))
-                                     if (~np.asarray(out.stable)).any() else None),
+        "first_unstable_slope_deg": (
+            float(np.degrees(psis[~np.asarray(out.stable)][0]))
+            if (~np.asarray(out.stable)).any()
+            else None
+        ),
     }
     for k, v in res.items():
         print(f"{k}: {v}")

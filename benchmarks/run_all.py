@@ -47,11 +47,12 @@ def _machine():
                     break
     except OSError:
         pass
-    code = ("import json, jax; d = jax.devices()[0]; print(json.dumps(dict("
-            "jax=jax.__version__, backend=jax.default_backend(), device=d.device_kind, "
-            "num_devices=len(jax.devices()))))")
-    out = subprocess.run([sys.executable, "-c", code], check=False, capture_output=True,
-                         text=True)
+    code = (
+        "import json, jax; d = jax.devices()[0]; print(json.dumps(dict("
+        "jax=jax.__version__, backend=jax.default_backend(), device=d.device_kind, "
+        "num_devices=len(jax.devices()))))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], check=False, capture_output=True, text=True)
     info = json.loads(out.stdout.strip().splitlines()[-1]) if out.returncode == 0 else {}
     return dict(cpu=cpu, cores=os.cpu_count(), python=platform.python_version(), **info)
 
@@ -67,8 +68,11 @@ def _run(script, args, out_json, log):
     if rc != 0 or not os.path.exists(out_json):
         with open(log) as fh:
             tail = fh.read()[-2000:]
-        print(f"[run_all] {script} failed (exit {rc}); last lines of its output:\n{tail}",
-              file=sys.stderr, flush=True)
+        print(
+            f"[run_all] {script} failed (exit {rc}); last lines of its output:\n{tail}",
+            file=sys.stderr,
+            flush=True,
+        )
         return None, wall
     with open(out_json) as fh:
         return json.load(fh), wall
@@ -89,56 +93,104 @@ def _rows(name, res):
     """Table rows (job, vhcjax, scipy, ratio, compile) from one script's JSON."""
     if name.startswith("simulate"):
         tol = f"{res['rtol']:g}".replace("e-0", "e-")
-        job = (f"simulation, {res['walkers']:,} walkers x {res['steps']} steps, "
-               f"{res['solver']}, rtol = atol = {tol}, "
-               f"{res['num_devices']} device{'s' if res['num_devices'] > 1 else ''}")
-        return [(job, f"{_fmt(res['vhcjax_walker_steps_per_s'])} walker-steps/s",
-                 (f"{_fmt(res['scipy_walker_steps_per_s'])} walker-steps/s "
-                  f"({res['scipy_method']})"), f"{res['speedup']:.1f}x",
-                 f"{res['compile_s']:.1f} s")]
+        job = (
+            f"simulation, {res['walkers']:,} walkers x {res['steps']} steps, "
+            f"{res['solver']}, rtol = atol = {tol}, "
+            f"{res['num_devices']} device{'s' if res['num_devices'] > 1 else ''}"
+        )
+        return [
+            (
+                job,
+                f"{_fmt(res['vhcjax_walker_steps_per_s'])} walker-steps/s",
+                (f"{_fmt(res['scipy_walker_steps_per_s'])} walker-steps/s ({res['scipy_method']})"),
+                f"{res['speedup']:.1f}x",
+                f"{res['compile_s']:.1f} s",
+            )
+        ]
     if name == "gait_search":
         rows = []
         for r in res["rows"]:
             method = "VHC (Problem 1)" if r["method"] == "vhc" else "shooting (Problem 2)"
-            rows.append((f"gait search, {method}, B = {r['B']:,}",
-                         f"{_fmt(r['jax_gaits_per_s'])} gaits/s",
-                         f"{_fmt(r['scipy_gaits_per_s'])} gaits/s", f"{r['ratio']:.1f}x",
-                         f"{r['compile_s']:.1f} s"))
+            rows.append(
+                (
+                    f"gait search, {method}, B = {r['B']:,}",
+                    f"{_fmt(r['jax_gaits_per_s'])} gaits/s",
+                    f"{_fmt(r['scipy_gaits_per_s'])} gaits/s",
+                    f"{r['ratio']:.1f}x",
+                    f"{r['compile_s']:.1f} s",
+                )
+            )
         return rows
     if name == "stability":
-        job = (f"multipliers (transverse + Poincaré) of {res['slopes']:,} slopes, one call")
-        return [(job, f"{_fmt(res['vhcjax_ms_per_slope_both_methods'])} ms/slope",
-                 f"{_fmt(res['scipy_ms_per_slope_fd'])} ms/slope (finite differences)",
-                 f"{res['speedup_per_slope']:.1f}x", f"{res['vhcjax_compile_s']:.1f} s")]
+        job = f"multipliers (transverse + Poincaré) of {res['slopes']:,} slopes, one call"
+        return [
+            (
+                job,
+                f"{_fmt(res['vhcjax_ms_per_slope_both_methods'])} ms/slope",
+                f"{_fmt(res['scipy_ms_per_slope_fd'])} ms/slope (finite differences)",
+                f"{res['speedup_per_slope']:.1f}x",
+                f"{res['vhcjax_compile_s']:.1f} s",
+            )
+        ]
     if name == "basin":
         g = res["grid"]
         v, s = res["vhcjax"], res["scipy"]
         est = s["estimated_full_grid_s"]
         job = f"basin slice, {g[0]} x {g[1]} points, <= {res['max_steps']} steps each"
-        return [(job, f"{v['run_s']:.1f} s ({_fmt(v['walker_steps_per_s'])} walker-steps/s)",
-                 f"~{est:.0f} s ({_fmt(s['walker_steps_per_s'])} walker-steps/s)"
-                 if est is not None else "-",
-                 f"{res['speedup']:.1f}x", f"{v['compile_s']:.1f} s")]
+        return [
+            (
+                job,
+                f"{v['run_s']:.1f} s ({_fmt(v['walker_steps_per_s'])} walker-steps/s)",
+                f"~{est:.0f} s ({_fmt(s['walker_steps_per_s'])} walker-steps/s)"
+                if est is not None
+                else "-",
+                f"{res['speedup']:.1f}x",
+                f"{v['compile_s']:.1f} s",
+            )
+        ]
     if name == "cli":
         g, sw, lib = res["gait"], res["sweep"], res["library_first_call"]
         rows = [
-            ("`vhcjax gait --slope-deg 3 --json`, first run (empty cache)",
-             f"{g['first_s']:.1f} s", f"{g['scipy_s']:.2f} s (script)",
-             f"{g['first_ratio']:.0f}x slower", "included"),
-            ("`vhcjax gait --slope-deg 3 --json`, second run",
-             f"{g['second_s']:.1f} s", f"{g['scipy_s']:.2f} s (script)",
-             f"{g['second_ratio']:.1f}x slower", "cached"),
-            (f"`vhcjax sweep` with `--csv`, {sw['n1']:,} and {sw['n2']:,} slopes "
-             f"({sw['found2']:,} found)",
-             f"{sw['per_gait_ms']:.2f} ms/gait + {sw['fixed_s']:.1f} s",
-             f"{sw['scipy_per_gait_ms']:.1f} ms/gait (fsolve continuation)",
-             f"{sw['ratio']:.0f}x", f"{sw['cold_fixed_s']:.1f} s fixed, empty cache"),
-            ("fresh Python process: `find_gait` + `gait_multipliers` at 3 deg",
-             f"{lib['wall_s']:.1f} s", "-", "-", "cached"),
+            (
+                "`vhcjax gait --slope-deg 3 --json`, first run (empty cache)",
+                f"{g['first_s']:.1f} s",
+                f"{g['scipy_s']:.2f} s (script)",
+                f"{g['first_ratio']:.0f}x slower",
+                "included",
+            ),
+            (
+                "`vhcjax gait --slope-deg 3 --json`, second run",
+                f"{g['second_s']:.1f} s",
+                f"{g['scipy_s']:.2f} s (script)",
+                f"{g['second_ratio']:.1f}x slower",
+                "cached",
+            ),
+            (
+                f"`vhcjax sweep` with `--csv`, {sw['n1']:,} and {sw['n2']:,} slopes "
+                f"({sw['found2']:,} found)",
+                f"{sw['per_gait_ms']:.2f} ms/gait + {sw['fixed_s']:.1f} s",
+                f"{sw['scipy_per_gait_ms']:.1f} ms/gait (fsolve continuation)",
+                f"{sw['ratio']:.0f}x",
+                f"{sw['cold_fixed_s']:.1f} s fixed, empty cache",
+            ),
+            (
+                "fresh Python process: `find_gait` + `gait_multipliers` at 3 deg",
+                f"{lib['wall_s']:.1f} s",
+                "-",
+                "-",
+                "cached",
+            ),
         ]
         for name_, t in res["commands"].items():
-            rows.append((f"`vhcjax {name_}`, second run", "failed" if t is None else
-                         f"{t:.1f} s", "-", "-", "cached"))
+            rows.append(
+                (
+                    f"`vhcjax {name_}`, second run",
+                    "failed" if t is None else f"{t:.1f} s",
+                    "-",
+                    "-",
+                    "cached",
+                )
+            )
         return rows
     raise ValueError(name)
 
@@ -148,8 +200,11 @@ def main(argv=None):
     ap.add_argument("--quick", action="store_true", help="each script's --quick sizes")
     ap.add_argument("--markdown", action="store_true", help="print a markdown table")
     ap.add_argument("--keep", metavar="DIR", help="keep the JSON outputs and logs here")
-    ap.add_argument("--only", metavar="NAMES",
-                    help="comma-separated subset of: " + ", ".join(j[0] for j in JOBS))
+    ap.add_argument(
+        "--only",
+        metavar="NAMES",
+        help="comma-separated subset of: " + ", ".join(j[0] for j in JOBS),
+    )
     args = ap.parse_args(argv)
 
     machine = _machine()
@@ -165,8 +220,12 @@ def main(argv=None):
         extra = [str(cores) if a == "CORES" else a for a in extra]
         if args.quick:
             extra = [*extra, "--quick"]
-        res, _ = _run(script, extra, os.path.join(workdir, f"{name}.json"),
-                      os.path.join(workdir, f"{name}.log"))
+        res, _ = _run(
+            script,
+            extra,
+            os.path.join(workdir, f"{name}.json"),
+            os.path.join(workdir, f"{name}.log"),
+        )
         if res is None:
             failed.append(name)
             rows.append((f"{name} ({script})", "failed", "-", "-", "-"))
@@ -175,11 +234,13 @@ def main(argv=None):
     total = time.perf_counter() - total
 
     header = ("job", "vhcjax", "scipy, same job", "ratio", "vhcjax compile")
-    line = (f"Machine: {machine['cpu']}, {machine['cores']} cores; Python {machine['python']}, "
-            f"JAX {machine.get('jax', '?')}, backend {machine.get('backend', '?')} "
-            f"({machine.get('num_devices', '?')} x {machine.get('device', '?')}); float64. "
-            f"`python benchmarks/run_all.py{' --quick' if args.quick else ''} --markdown`, "
-            f"{total / 60:.0f} min in all.")
+    line = (
+        f"Machine: {machine['cpu']}, {machine['cores']} cores; Python {machine['python']}, "
+        f"JAX {machine.get('jax', '?')}, backend {machine.get('backend', '?')} "
+        f"({machine.get('num_devices', '?')} x {machine.get('device', '?')}); float64. "
+        f"`python benchmarks/run_all.py{' --quick' if args.quick else ''} --markdown`, "
+        f"{total / 60:.0f} min in all."
+    )
     if args.quick:
         line += " QUICK SIZES: a check that the scripts run, not a measurement."
     if args.markdown:

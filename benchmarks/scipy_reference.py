@@ -140,8 +140,7 @@ class StepOut:
     nfev: int
 
 
-def step(par: Params, x0, *, rtol=1e-12, atol=1e-12, method="DOP853", t_max=None,
-         dense=False):
+def step(par: Params, x0, *, rtol=1e-12, atol=1e-12, method="DOP853", t_max=None, dense=False):
     """One step from the post-impact state `x0`: swing (two stages: until the swing leg
     passes the stance leg, then until heel strike), impact, relabelling."""
     rhs = make_rhs(par)

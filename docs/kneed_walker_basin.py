@@ -9,8 +9,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from vhcjax.hybrid import _poincare as P
-from vhcjax.robustness._basin import basin_slice
 from vhcjax.models._kneed_walker import KneedWalker
+from vhcjax.robustness._basin import basin_slice
 from vhcjax.robustness._recovery import CONVERGED
 
 
@@ -23,18 +23,23 @@ def main(n=21):
     m = KneedWalker(psi=jnp.asarray(0.0504))
     fp = eqx.filter_jit(P.fixed_point)(m, jnp.array([0.19, -1.10, -0.04]))
     t = time.time()
-    bs = basin_slice(m, fp.z, axes=(0, 1), half_widths=(0.08, 0.6), shape=(n, n),
-                     num_steps=40, chunk=512)
+    bs = basin_slice(
+        m, fp.z, axes=(0, 1), half_widths=(0.08, 0.6), shape=(n, n), num_steps=40, chunk=512
+    )
     print("time", time.time() - t, "fraction", bs.fraction, "reach", bs.max_converging)
     conv = np.asarray(bs.label) == CONVERGED
     fig, ax = plt.subplots(figsize=(5, 4))
-    ax.pcolormesh(fp.z[0] + bs.offsets_x, fp.z[1] + bs.offsets_y, conv, cmap="Greens",
-                  shading="nearest")
+    ax.pcolormesh(
+        fp.z[0] + bs.offsets_x, fp.z[1] + bs.offsets_y, conv, cmap="Greens", shading="nearest"
+    )
     ax.plot(fp.z[0], fp.z[1], "r*", ms=10, label="gait")
     ax.set_xlabel("q1 after heel strike (rad)")
     ax.set_ylabel("dq1 after heel strike (rad/s)")
-    ax.set_title(f"Kneed walker, slope 0.0504 rad: basin slice {n}x{n}\n"
-                 "(green: back to the gait within 40 steps)", fontsize=9)
+    ax.set_title(
+        f"Kneed walker, slope 0.0504 rad: basin slice {n}x{n}\n"
+        "(green: back to the gait within 40 steps)",
+        fontsize=9,
+    )
     ax.legend()
     fig.tight_layout()
     fig.savefig("kneed_walker_basin.png", dpi=110)

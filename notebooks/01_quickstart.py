@@ -72,8 +72,11 @@ from vhcjax import plotting
 OUT = os.environ.get("VHCJAX_NOTEBOOK_OUT") or tempfile.mkdtemp(prefix="vhcjax_quickstart_")
 os.makedirs(OUT, exist_ok=True)
 case = "thesis (7.5), stable gait, 3 deg"
-for name, fn in (("states", plotting.plot_states), ("phase", plotting.plot_phase_portrait),
-                 ("periods", plotting.plot_step_periods)):
+for name, fn in (
+    ("states", plotting.plot_states),
+    ("phase", plotting.plot_phase_portrait),
+    ("periods", plotting.plot_step_periods),
+):
     path = os.path.join(OUT, f"01_{name}.png")
     fn(sim, path=path, case=case)
     print("wrote", path)

@@ -43,8 +43,11 @@ s3 = 0
 for k in "abcdefgh":
     print(f"  {k} = {float(getattr(g, k)[s3]): .6f}")
 print(f"  T = {float(g.T[s3]):.6f} s, E0 = {float(g.E0[s3]):.6f} J")
-print("seed (0.20, +1.0) gives the uphill solution (7.18):", vj.result_names(g.result)[1],
-      np.round(np.asarray(g.z[1]), 6))
+print(
+    "seed (0.20, +1.0) gives the uphill solution (7.18):",
+    vj.result_names(g.result)[1],
+    np.round(np.asarray(g.z[1]), 6),
+)
 
 # %% [markdown]
 # ## Cross-check: the hybrid simulator returns to the gait
@@ -81,8 +84,7 @@ sl = np.linspace(1.0, 6.0, n)
 
 
 def family(fam):
-    gg = vj.find_gaits(vj.CompassGait(), np.tile([0.20, -1.0], (n, 1)), fam,
-                       psi=np.radians(sl))
+    gg = vj.find_gaits(vj.CompassGait(), np.tile([0.20, -1.0], (n, 1)), fam, psi=np.radians(sl))
     for _ in range(4):
         ok = np.array(vj.result_names(gg.result)) == "successful"
         if ok.all():
@@ -94,7 +96,8 @@ def family(fam):
         g2 = vj.find_gaits(vj.CompassGait(), seeds, fam, psi=np.radians(sl))
         take = (np.array(vj.result_names(g2.result)) == "successful") & ~ok
         gg = jax.tree_util.tree_map(  # keep the new solutions where the old ones failed
-            lambda x, y: jnp.where(take.reshape((-1,) + (1,) * (x.ndim - 1)), y, x), gg, g2)
+            lambda x, y: jnp.where(take.reshape((-1,) + (1,) * (x.ndim - 1)), y, x), gg, g2
+        )
     return gg
 
 
@@ -105,11 +108,11 @@ for f, gg in fams.items():
     print(f"{f} family: {ok.sum()} of {n} slopes; T from {T.min():.4f} to {T.max():.4f} s")
 
 # %%
-from vhcjax.plotting._gait import plot_sweep  # noqa: E402
-
 # Figures go to $VHCJAX_NOTEBOOK_OUT, or to a fresh temporary folder: never into the
 # repository.
 import tempfile
+
+from vhcjax.plotting._gait import plot_sweep  # noqa: E402
 
 OUT = os.environ.get("VHCJAX_NOTEBOOK_OUT") or tempfile.mkdtemp(prefix="vhcjax_notebook_")
 os.makedirs(OUT, exist_ok=True)

@@ -24,8 +24,8 @@ import os
 import numpy as np
 
 import vhcjax as vj
-from vhcjax.stability import _multipliers as S
 from vhcjax.plotting._stability import plot_bifurcation, plot_multipliers_complex
+from vhcjax.stability import _multipliers as S
 
 FULL = os.environ.get("VHCJAX_FULL") == "1"
 # Figures go to $VHCJAX_NOTEBOOK_OUT, or to a fresh temporary folder: never into the
@@ -50,8 +50,10 @@ def multipliers(psis, zs):
     pad = (-n) % B
     p = np.concatenate([psis, np.repeat(psis[:1], pad)])
     z = np.concatenate([zs, np.repeat(zs[:1], pad, 0)])
-    out = [vj.family_multipliers(vj.CompassGait(), p[i:i + B], z[i:i + B])
-           for i in range(0, len(p), B)]
+    out = [
+        vj.family_multipliers(vj.CompassGait(), p[i : i + B], z[i : i + B])
+        for i in range(0, len(p), B)
+    ]
     tr = np.concatenate([np.asarray(o.transverse) for o in out])[:n]
     pc = np.concatenate([np.asarray(o.poincare) for o in out])[:n]
     return tr, pc
@@ -63,10 +65,12 @@ tr, pc = multipliers(np.radians([3.0, 3.0]), z3)
 for name, t, p in zip(("stable", "unstable"), tr, pc):
     print(f"{name:>8s} gait: transverse {np.round(t, 5)}")
     print(f"{'':>8s}       Poincare   {np.round(p, 5)}   max diff {np.max(np.abs(t - p)):.1e}")
-fig = plot_multipliers_complex([tr[0], pc[0], tr[1], pc[1]],
-                               ["stable: transverse", "stable: Poincare",
-                                "unstable: transverse", "unstable: Poincare"],
-                               os.path.join(OUT, "03_multipliers_3deg.png"), title="3 deg")
+fig = plot_multipliers_complex(
+    [tr[0], pc[0], tr[1], pc[1]],
+    ["stable: transverse", "stable: Poincare", "unstable: transverse", "unstable: Poincare"],
+    os.path.join(OUT, "03_multipliers_3deg.png"),
+    title="3 deg",
+)
 
 # %% [markdown]
 # ## The stable family along the slope
@@ -80,8 +84,10 @@ fam = S.period1_family(np.radians(slopes), "stable")
 tr, pc = multipliers(np.radians(slopes), np.asarray(fam.z))
 rho = np.max(np.abs(tr), axis=1)
 for s, r, d in zip(slopes, rho, np.max(np.abs(tr - pc), axis=1)):
-    print(f"  {s:5.2f} deg: spectral radius {r:.4f} ({'stable' if r < 1 else 'unstable'}),"
-          f" transverse - Poincare {d:.1e}")
+    print(
+        f"  {s:5.2f} deg: spectral radius {r:.4f} ({'stable' if r < 1 else 'unstable'}),"
+        f" transverse - Poincare {d:.1e}"
+    )
 
 # %% [markdown]
 # ## The period-doubling slope
@@ -92,8 +98,9 @@ for s, r, d in zip(slopes, rho, np.max(np.abs(tr - pc), axis=1)):
 # %%
 i = int(np.argmax(rho >= 1)) - 1
 if FULL:
-    pd = S.period_doubling_slope(math.radians(slopes[i]), math.radians(slopes[i + 1]),
-                                 np.asarray(fam.z[i]))
+    pd = S.period_doubling_slope(
+        math.radians(slopes[i]), math.radians(slopes[i + 1]), np.asarray(fam.z[i])
+    )
     pd_deg = math.degrees(pd.psi)
     print("multipliers at the flip:", np.round(pd.multipliers, 5))
 else:
@@ -117,12 +124,20 @@ print(f"period doubling at {pd_deg:.5f} deg (thesis: 'about 4.4')")
 nb = 128 if FULL else 8
 sb = np.linspace(4.0, 5.3, nb)
 fb = S.period1_family(np.radians(sb), "stable")
-diag = S.bifurcation_diagram(np.radians(sb), np.asarray(fb.z),
-                             num_transient=300 if FULL else 40,
-                             num_record=64 if FULL else 16)
-print("pattern (steps per repetition; 0 aperiodic or unsettled, -1 fell):",
-      {round(float(a), 2): int(p) for a, p in zip(sb, diag.period_pattern)})
-fig = plot_bifurcation(diag, [("period 1", sb, np.asarray(fb.periods), sb < pd_deg)],
-                       os.path.join(OUT, "03_bifurcation.png"),
-                       flips_deg=[pd_deg])
+diag = S.bifurcation_diagram(
+    np.radians(sb),
+    np.asarray(fb.z),
+    num_transient=300 if FULL else 40,
+    num_record=64 if FULL else 16,
+)
+print(
+    "pattern (steps per repetition; 0 aperiodic or unsettled, -1 fell):",
+    {round(float(a), 2): int(p) for a, p in zip(sb, diag.period_pattern)},
+)
+fig = plot_bifurcation(
+    diag,
+    [("period 1", sb, np.asarray(fb.periods), sb < pd_deg)],
+    os.path.join(OUT, "03_bifurcation.png"),
+    flips_deg=[pd_deg],
+)
 print("wrote figures to", OUT)

@@ -54,11 +54,20 @@ print("gait z* =", np.round(z_star, 7), " T =", round(T, 7), "s")
 
 # %%
 shape = (101, 101) if FULL else (9, 9)
-b = vj.basin_slice(model, z_star, axes=(0, 1), half_widths=(0.08, 0.4), shape=shape,
-                   num_steps=50 if FULL else 30, chunk=1024 if FULL else 81)
+b = vj.basin_slice(
+    model,
+    z_star,
+    axes=(0, 1),
+    half_widths=(0.08, 0.4),
+    shape=shape,
+    num_steps=50 if FULL else 30,
+    chunk=1024 if FULL else 81,
+)
 print(f"converging fraction {b.fraction:.3f}, area {b.area:.4g} rad^2/s")
-print("largest converging offsets along the grid lines:",
-      {k: round(float(v), 4) for k, v in b.max_converging.items()})
+print(
+    "largest converging offsets along the grid lines:",
+    {k: round(float(v), 4) for k, v in b.max_converging.items()},
+)
 plot_basin(b, os.path.join(OUT, "04_basin.png"))
 
 # %% [markdown]
@@ -71,11 +80,21 @@ plot_basin(b, os.path.join(OUT, "04_basin.png"))
 phases = np.arange(20 if FULL else 3) / (20 if FULL else 3)
 angles = np.radians([0.0, 90.0, 180.0, 270.0] if FULL else [0.0, 180.0])
 D = np.asarray(push_sensitivity_autodiff(model, x_star, T, jnp.asarray(phases)))
-res = max_push(model, x_star, T, phases, angles, p_max=20.0,
-               iterations=12 if FULL else 4, scan=8 if FULL else 3)
+res = max_push(
+    model,
+    x_star,
+    T,
+    phases,
+    angles,
+    p_max=20.0,
+    iterations=12 if FULL else 4,
+    scan=8 if FULL else 3,
+)
 for j, a in enumerate(angles):
-    print(f"direction {math.degrees(a):5.0f} deg: largest impulse survived (N s) "
-          f"{np.round(res.largest[:, j], 3)}")
+    print(
+        f"direction {math.degrees(a):5.0f} deg: largest impulse survived (N s) "
+        f"{np.round(res.largest[:, j], 3)}"
+    )
 plot_push(phases, D, angles, res.largest, os.path.join(OUT, "04_push.png"), p_max=20.0)
 
 # %% [markdown]

@@ -28,12 +28,14 @@ import numpy as np
 
 import vhcjax as vj
 from vhcjax.hybrid import _poincare as P
+
 FULL = os.environ.get("VHCJAX_FULL") == "1"
 
 
 # %%
 class RodWalker(vj.WalkerModel):
     """Two uniform rod legs (mass m, length l) and a hip point mass mH, on slope psi."""
+
     m: float | jax.Array = 5.0
     mH: float | jax.Array = 10.0
     l: float | jax.Array = 1.0
@@ -96,8 +98,13 @@ x_start = model.section_to_state(fp.z + jnp.array([0.0, 0.01, 0.0]))
 sim = eqx.filter_jit(vj.simulate)(model, x_start, 60)
 z_path = jax.vmap(model.state_to_section)(sim.steps.x_plus)
 dist = np.max(np.abs(np.asarray(z_path) - np.asarray(fp.z)), axis=1)
-print("simulation:", vj.result_names(sim.result), "| distance to the gait, first/last:",
-      dist[0], dist[-1])
+print(
+    "simulation:",
+    vj.result_names(sim.result),
+    "| distance to the gait, first/last:",
+    dist[0],
+    dist[-1],
+)
 assert sim.result == vj.RESULTS.successful and dist[-1] < 1e-6 * max(dist[0], 1.0)
 
 # %% [markdown]
@@ -108,18 +115,26 @@ assert sim.result == vj.RESULTS.successful and dist[-1] < 1e-6 * max(dist[0], 1.
 J = eqx.filter_jit(P.jacobian)(model, fp.z)
 h = 1e-6
 step_jit = eqx.filter_jit(lambda m, z: P.step_map(m, z).z_next)
-Jfd = np.stack([(step_jit(model, fp.z + h * e) - step_jit(model, fp.z - h * e)) / (2 * h)
-                for e in np.eye(3)], axis=1)
+Jfd = np.stack(
+    [(step_jit(model, fp.z + h * e) - step_jit(model, fp.z - h * e)) / (2 * h) for e in np.eye(3)],
+    axis=1,
+)
 ev = np.linalg.eigvals(np.asarray(J))
 print("multipliers (jacfwd):", ev, "| max |J - J_fd|:", np.abs(np.asarray(J) - Jfd).max())
 
-from vhcjax.stability._transverse import transverse_linearization  # noqa: E402
 from vhcjax.gait._vhc_n import vhc_orbit  # noqa: E402
+from vhcjax.stability._transverse import transverse_linearization  # noqa: E402
 
 orb = eqx.filter_jit(vhc_orbit)(model, fp.z)
 tl = eqx.filter_jit(transverse_linearization)(model, fp.x0, orb.x_minus, fp.periods[0])
-print("VHC arc:", vj.result_names(orb.result), "| returns to the gait to",
-      np.abs(np.asarray(orb.z_next - fp.z)).max(), "| period", orb.period)
+print(
+    "VHC arc:",
+    vj.result_names(orb.result),
+    "| returns to the gait to",
+    np.abs(np.asarray(orb.z_next - fp.z)).max(),
+    "| period",
+    orb.period,
+)
 print("multipliers (transverse):", vj.result_names(tl.result), np.asarray(tl.multipliers))
 ev_sorted = lambda e: np.sort_complex(np.asarray(e))  # noqa: E731
 assert np.abs(ev_sorted(tl.multipliers) - ev_sorted(ev)).max() < 1e-6

@@ -58,12 +58,17 @@ stab = {}
 for name, (model, z) in cases.items():
     st = vj.stabilize(model, z)
     stab[name] = st
-    print(f"{name}: Riccati two ways agree to {float(st.riccati_agreement):.1e}, "
-          f"max gain {float(st.max_gain):.1f}")
+    print(
+        f"{name}: Riccati two ways agree to {float(st.riccati_agreement):.1e}, "
+        f"max gain {float(st.max_gain):.1f}"
+    )
     print("  open loop  ", np.round(np.asarray(st.open_loop_multipliers), 6))
     print("  closed loop", np.round(np.asarray(st.closed_loop_multipliers), 6), "(Poincare)")
-    print("             ", np.round(np.asarray(st.closed_loop_multipliers_transverse), 6),
-          "(transverse)")
+    print(
+        "             ",
+        np.round(np.asarray(st.closed_loop_multipliers_transverse), 6),
+        "(transverse)",
+    )
 
 # %% [markdown]
 # ## Recovery from a perturbation
@@ -80,8 +85,10 @@ for name, (model, z) in cases.items():
         zs = np.asarray(jax.vmap(model.state_to_section)(sim.steps.x_plus))
         out.append(np.max(np.abs(zs - np.asarray(z)), axis=1))
         if isinstance(fb, vj.TransverseFeedback):
-            print(f"{name}: largest torque {float(np.max(sim.max_abs_torque)):.3f} N m, "
-                  f"error after 30 steps {out[-1][-1]:.2e}")
+            print(
+                f"{name}: largest torque {float(np.max(sim.max_abs_torque)):.3f} N m, "
+                f"error after 30 steps {out[-1][-1]:.2e}"
+            )
         else:
             print(f"{name}: passive walker, error after 30 steps {out[-1][-1]:.2e}")
     errors[name] = out
@@ -93,8 +100,13 @@ for name, (model, z) in cases.items():
 
 # %%
 shape = (41, 41) if FULL else (9, 9)
-kw = {"half_widths": (0.05, 0.3), "shape": shape, "num_steps": 25, "torque_points": 8,
-          "config": vj.FAST_CONFIG}
+kw = {
+    "half_widths": (0.05, 0.3),
+    "shape": shape,
+    "num_steps": 25,
+    "torque_points": 8,
+    "config": vj.FAST_CONFIG,
+}
 for name, (model, z) in cases.items():
     st = stab[name]
     bp = vj.closed_loop_basin(model, vj.ZeroFeedback(), z, **kw)
@@ -103,13 +115,25 @@ for name, (model, z) in cases.items():
         b = vj.closed_loop_basin(model, vj.with_torque_limit(st.feedback, lim), z, **kw)
         fractions[lim] = float(b.fraction)
     bc = vj.closed_loop_basin(model, st.feedback, z, **kw)
-    print(f"{name}: passive fraction {float(bp.fraction):.3f}; with feedback by torque "
-          f"limit (N m): {fractions}")
-    basin = {"z_star": np.asarray(z), "offsets_x": np.asarray(bc.offsets_x),
-                 "offsets_y": np.asarray(bc.offsets_y), "closed": np.asarray(bc.converged),
-                 "passive": np.asarray(bp.converged)}
+    print(
+        f"{name}: passive fraction {float(bp.fraction):.3f}; with feedback by torque "
+        f"limit (N m): {fractions}"
+    )
+    basin = {
+        "z_star": np.asarray(z),
+        "offsets_x": np.asarray(bc.offsets_x),
+        "offsets_y": np.asarray(bc.offsets_y),
+        "closed": np.asarray(bc.converged),
+        "passive": np.asarray(bp.converged),
+    }
     fname = os.path.join(OUT, "06_" + name.replace(" ", "_") + ".png")
-    vj.plotting.plot_stabilization(fname, f"Compass gait, {name} gait, hip-torque LQR",
-                                  np.asarray(st.system.s), np.asarray(st.riccati.K),
-                                  errors[name][0], errors[name][1], basin)
+    vj.plotting.plot_stabilization(
+        fname,
+        f"Compass gait, {name} gait, hip-torque LQR",
+        np.asarray(st.system.s),
+        np.asarray(st.riccati.K),
+        errors[name][0],
+        errors[name][1],
+        basin,
+    )
     print("wrote", fname)

@@ -63,14 +63,27 @@ print(f"spectral radius {float(rho):.6f}, d/dmH = {float(drho):.6f} per kg")
 # leg's centre of mass (0.3 to 0.7 m; `a` stays 0.5 m).
 
 # %%
-res = vj.design("spectral-radius", ["mass-hip", "b"], model=model,
-                bounds={"mass-hip": (5.0, 30.0), "b": (0.3, 0.7)},
-                steps=40 if FULL else 6, learning_rate=0.1)
+res = vj.design(
+    "spectral-radius",
+    ["mass-hip", "b"],
+    model=model,
+    bounds={"mass-hip": (5.0, 30.0), "b": (0.3, 0.7)},
+    steps=40 if FULL else 6,
+    learning_rate=0.1,
+)
 print(res.result, "after", res.iterations, "iterations")
-print("start  ", {k: round(v, 4) for k, v in res.initial["params"].items()},
-      "radius", round(res.initial["value"], 6))
-print("optimum", {k: round(v, 4) for k, v in res.optimum["params"].items()},
-      "radius", round(res.optimum["value"], 6))
+print(
+    "start  ",
+    {k: round(v, 4) for k, v in res.initial["params"].items()},
+    "radius",
+    round(res.initial["value"], 6),
+)
+print(
+    "optimum",
+    {k: round(v, 4) for k, v in res.optimum["params"].items()},
+    "radius",
+    round(res.optimum["value"], 6),
+)
 print("multipliers at the optimum:", np.round(res.optimum["multipliers"], 5))
 
 fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 3.5))
@@ -78,8 +91,9 @@ it = [h["iteration"] for h in res.history]
 ax1.plot(it, [h["value"] for h in res.history], "o-")
 ax1.set_xlabel("iteration (-)")
 ax1.set_ylabel("spectral radius (-)")
-ax2.plot([h["params"]["mass-hip"] for h in res.history],
-         [h["params"]["b"] for h in res.history], "o-")
+ax2.plot(
+    [h["params"]["mass-hip"] for h in res.history], [h["params"]["b"] for h in res.history], "o-"
+)
 ax2.set_xlabel("hip mass (kg)")
 ax2.set_ylabel("b (m)")
 fig.suptitle("Most robust compass gait at 3 deg")

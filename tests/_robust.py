@@ -2,20 +2,19 @@
 
 import functools
 
-import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
 import vhcjax as vj
-from vhcjax.hybrid._simulate import DEFAULT_CONFIG, simulate_jit
 from vhcjax.hybrid import _poincare as _poincare
+from vhcjax.hybrid._simulate import DEFAULT_CONFIG, simulate_jit
+
 SEED = (0.2187, -1.092, -0.377)  # Newton seed (rounded) for the stable 3-degree gait
 fixed_point_jit = _poincare.fixed_point_jit
 step_jit = vj.step  # jitted by the library
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def stable_gait():
     """`(model, z_star, x_star, period)` of the stable 3-degree gait (Newton, 1e-12)."""
     model = vj.CompassGait()

@@ -9,31 +9,57 @@ import pytest
 
 from vhcjax.cli import main
 
-DESIGN_KEYS = {"objective", "slope_deg", "vary", "result", "iterations", "initial", "optimum",
-               "history"}
+DESIGN_KEYS = {
+    "objective",
+    "slope_deg",
+    "vary",
+    "result",
+    "iterations",
+    "initial",
+    "optimum",
+    "history",
+}
 
 
-@pytest.mark.parametrize("argv,msg", [
-    (["design", "--objective", "speed", "--vary", "mass-hip", "--slope-deg", "nan"], "--slope-deg"),
-    (["design", "--objective", "speed", "--vary", "legs"], "--vary"),
-    (["design", "--objective", "speed", "--vary", "a,a"], "--vary"),
-    (["design", "--objective", "speed", "--vary", "a", "--bounds", "a=0.9:0.1"], "--bounds"),
-    (["design", "--objective", "speed", "--vary", "a", "--bounds", "a=nan:1"], "--bounds"),
-    (["design", "--objective", "speed", "--vary", "a", "--bounds", "b=0.1:0.9"], "--bounds"),
-    (["design", "--objective", "speed", "--vary", "a", "--bounds", "a=0.6:0.9"], "bounds"),
-    (["design", "--objective", "speed", "--vary", "a", "--steps", "0"], "--steps"),
-    (["design", "--objective", "speed", "--vary", "a", "--learning-rate", "-1"], "--learning-rate"),
-    (["design", "--objective", "speed", "--vary", "a", "--learning-rate", "inf"], "--learning-rate"),
-    (["design", "--objective", "speed", "--vary", "a", "--mass-hip", "-3"], "--mass-hip"),
-    (["atlas", "--mass-ratio", "1:0:1", "--length-ratio", "1"], "--mass-ratio"),
-    (["atlas", "--mass-ratio", "1,x", "--length-ratio", "1"], "--mass-ratio"),
-    (["atlas", "--mass-ratio", "2", "--length-ratio", "-1"], "--length-ratio"),
-    (["atlas", "--mass-ratio", "2", "--length-ratio", "nan"], "--length-ratio"),
-    (["atlas", "--mass-ratio", "2", "--length-ratio", "1", "--slope-deg", "45"], "--slope-deg"),
-    (["atlas", "--mass-ratio", "2", "--length-ratio", "1", "--scan-step-deg", "0"], "--scan-step-deg"),
-    (["atlas", "--mass-ratio", "2", "--length-ratio", "1", "--scan-max-deg", "0.5"], "--scan-max-deg"),
-    (["atlas", "--mass-ratio", "2", "--length-ratio", "1", "--gravity", "inf"], "--gravity"),
-])
+@pytest.mark.parametrize(
+    "argv,msg",
+    [
+        (
+            ["design", "--objective", "speed", "--vary", "mass-hip", "--slope-deg", "nan"],
+            "--slope-deg",
+        ),
+        (["design", "--objective", "speed", "--vary", "legs"], "--vary"),
+        (["design", "--objective", "speed", "--vary", "a,a"], "--vary"),
+        (["design", "--objective", "speed", "--vary", "a", "--bounds", "a=0.9:0.1"], "--bounds"),
+        (["design", "--objective", "speed", "--vary", "a", "--bounds", "a=nan:1"], "--bounds"),
+        (["design", "--objective", "speed", "--vary", "a", "--bounds", "b=0.1:0.9"], "--bounds"),
+        (["design", "--objective", "speed", "--vary", "a", "--bounds", "a=0.6:0.9"], "bounds"),
+        (["design", "--objective", "speed", "--vary", "a", "--steps", "0"], "--steps"),
+        (
+            ["design", "--objective", "speed", "--vary", "a", "--learning-rate", "-1"],
+            "--learning-rate",
+        ),
+        (
+            ["design", "--objective", "speed", "--vary", "a", "--learning-rate", "inf"],
+            "--learning-rate",
+        ),
+        (["design", "--objective", "speed", "--vary", "a", "--mass-hip", "-3"], "--mass-hip"),
+        (["atlas", "--mass-ratio", "1:0:1", "--length-ratio", "1"], "--mass-ratio"),
+        (["atlas", "--mass-ratio", "1,x", "--length-ratio", "1"], "--mass-ratio"),
+        (["atlas", "--mass-ratio", "2", "--length-ratio", "-1"], "--length-ratio"),
+        (["atlas", "--mass-ratio", "2", "--length-ratio", "nan"], "--length-ratio"),
+        (["atlas", "--mass-ratio", "2", "--length-ratio", "1", "--slope-deg", "45"], "--slope-deg"),
+        (
+            ["atlas", "--mass-ratio", "2", "--length-ratio", "1", "--scan-step-deg", "0"],
+            "--scan-step-deg",
+        ),
+        (
+            ["atlas", "--mass-ratio", "2", "--length-ratio", "1", "--scan-max-deg", "0.5"],
+            "--scan-max-deg",
+        ),
+        (["atlas", "--mass-ratio", "2", "--length-ratio", "1", "--gravity", "inf"], "--gravity"),
+    ],
+)
 def test_errors_are_one_line(capsys, argv, msg):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
@@ -48,8 +74,22 @@ def test_bad_objective_exits_2():
 
 def test_design_json_png(tmp_path, capsys):
     png = tmp_path / "d.png"
-    rc = main(["design", "--objective", "speed", "--vary", "mass-hip,a", "--steps", "3",
-               "--bounds", "mass-hip=5:20,a=0.3:0.7", "--json", "--png", str(png)])
+    rc = main(
+        [
+            "design",
+            "--objective",
+            "speed",
+            "--vary",
+            "mass-hip,a",
+            "--steps",
+            "3",
+            "--bounds",
+            "mass-hip=5:20,a=0.3:0.7",
+            "--json",
+            "--png",
+            str(png),
+        ]
+    )
     out = json.loads(capsys.readouterr().out)
     assert rc == 0
     assert DESIGN_KEYS <= set(out)
@@ -65,23 +105,43 @@ def test_design_json_png(tmp_path, capsys):
 
 def test_atlas_json_csv_png(tmp_path, capsys):
     csv_path, png = tmp_path / "a.csv", tmp_path / "a.png"
-    rc = main(["atlas", "--mass-ratio", "2", "--length-ratio", "0.9,1", "--slope-deg", "3",
-               "--json", "--csv", str(csv_path), "--png", str(png)])
+    rc = main(
+        [
+            "atlas",
+            "--mass-ratio",
+            "2",
+            "--length-ratio",
+            "0.9,1",
+            "--slope-deg",
+            "3",
+            "--json",
+            "--csv",
+            str(csv_path),
+            "--png",
+            str(png),
+        ]
+    )
     out = json.loads(capsys.readouterr().out)
     assert rc == 0
     assert set(out) == {"mass_ratio", "length_ratio", "cells"}
     assert out["mass_ratio"] == [2.0] and out["length_ratio"] == [0.9, 1.0]
     for c in out["cells"]:
-        assert {"mass_ratio", "length_ratio", "flip_slope_deg", "stable_range_deg",
-                "spectral_radius"} <= set(c)
+        assert {
+            "mass_ratio",
+            "length_ratio",
+            "flip_slope_deg",
+            "stable_range_deg",
+            "spectral_radius",
+        } <= set(c)
     table1 = out["cells"][1]
     assert abs(table1["flip_slope_deg"] - 4.390898) < 1e-4  # `period_doubling_slope`
     lo, hi = table1["stable_range_deg"]
     assert lo <= 3.0 < hi == table1["flip_slope_deg"]
     assert 0 < table1["spectral_radius"] < 1
     rows = list(csv.DictReader(open(csv_path)))
-    assert len(rows) == 2 and math.isclose(float(rows[1]["flip_slope_deg"]),
-                                           table1["flip_slope_deg"])
+    assert len(rows) == 2 and math.isclose(
+        float(rows[1]["flip_slope_deg"]), table1["flip_slope_deg"]
+    )
     assert png.stat().st_size > 10_000
     assert "NaN" not in json.dumps(out) and "Infinity" not in json.dumps(out)
     assert np.isfinite(float(rows[0]["spectral_radius"]))

@@ -15,13 +15,34 @@ from vhcjax.cli import main
 
 
 def test_gait_json(capsys):
-    rc = main(["gait", "--slope-deg", "3", "--family", "stable", "--method", "vhc",
-               "--guess", "0.2", "-1.0", "--json"])
+    rc = main(
+        [
+            "gait",
+            "--slope-deg",
+            "3",
+            "--family",
+            "stable",
+            "--method",
+            "vhc",
+            "--guess",
+            "0.2",
+            "-1.0",
+            "--json",
+        ]
+    )
     out = json.loads(capsys.readouterr().out)
     assert rc == 0
     # issue 4 adds keys (multipliers); these must be there
-    assert {"result", "slope_deg", "family", "method", "x0", "params", "iterations",
-            "residual"} <= set(out)
+    assert {
+        "result",
+        "slope_deg",
+        "family",
+        "method",
+        "x0",
+        "params",
+        "iterations",
+        "residual",
+    } <= set(out)
     assert out["result"] == "successful" and out["family"] == "stable" and out["method"] == "vhc"
     assert set(out["params"]) == set("abcdefgh") | {"T", "E0"}
     g = G.find_gait(vj.CompassGait(), "stable", guess=(0.2, -1.0))
@@ -32,15 +53,18 @@ def test_gait_json(capsys):
     np.testing.assert_allclose(out["x0"][:2], [0.218669, -0.323389], atol=6e-7)
 
 
-@pytest.mark.parametrize("argv,msg", [
-    (["gait", "--slope-deg", "40"], "--slope-deg"),
-    (["gait", "--slope-deg", "nan"], "--slope-deg"),
-    (["gait", "--mass-hip", "-1"], "--mass-hip"),
-    (["gait", "--guess", "nan", "1"], "--guess"),
-    (["sweep", "--slope-deg", "1:0.5:0.1"], "--slope-deg"),
-    (["sweep", "--slope-deg", "1:2"], "--slope-deg"),
-    (["sweep", "--slope-deg", "0:2:1"], "--slope-deg"),
-])
+@pytest.mark.parametrize(
+    "argv,msg",
+    [
+        (["gait", "--slope-deg", "40"], "--slope-deg"),
+        (["gait", "--slope-deg", "nan"], "--slope-deg"),
+        (["gait", "--mass-hip", "-1"], "--mass-hip"),
+        (["gait", "--guess", "nan", "1"], "--guess"),
+        (["sweep", "--slope-deg", "1:0.5:0.1"], "--slope-deg"),
+        (["sweep", "--slope-deg", "1:2"], "--slope-deg"),
+        (["sweep", "--slope-deg", "0:2:1"], "--slope-deg"),
+    ],
+)
 def test_errors_are_one_line(capsys, argv, msg):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
@@ -56,14 +80,39 @@ def test_bad_choice_exits_2(capsys):
 @pytest.mark.slow
 def test_sweep_csv_png(tmp_path, capsys):
     csv_path, png_path = tmp_path / "s.csv", tmp_path / "s.png"
-    rc = main(["sweep", "--slope-deg", "2.5:3.5:0.5", "--family", "both",
-               "--csv", str(csv_path), "--png", str(png_path)])
+    rc = main(
+        [
+            "sweep",
+            "--slope-deg",
+            "2.5:3.5:0.5",
+            "--family",
+            "both",
+            "--csv",
+            str(csv_path),
+            "--png",
+            str(png_path),
+        ]
+    )
     assert rc == 0
     rows = list(csv.DictReader(open(csv_path)))
     assert len(rows) == 6
     # the issue's columns, in order, then the stability columns
-    assert list(rows[0])[1:15] == ["slope_deg", "result", "a", "b", "c", "d", "e", "f", "g", "h",
-                                   "T", "E0", "step_length", "speed"]
+    assert list(rows[0])[1:15] == [
+        "slope_deg",
+        "result",
+        "a",
+        "b",
+        "c",
+        "d",
+        "e",
+        "f",
+        "g",
+        "h",
+        "T",
+        "E0",
+        "step_length",
+        "speed",
+    ]
     assert "mult1_re" in rows[0] and "stable" in rows[0]
     # the stable family is stable at these slopes, the unstable one is not
     assert all(r["stable"] in ("True", "true", "1") for r in rows if r["family"] == "stable")
@@ -73,7 +122,6 @@ def test_sweep_csv_png(tmp_path, capsys):
     np.testing.assert_allclose(float(r3["a"]), 0.204676, atol=6e-7)  # thesis (7.9)
     assert png_path.stat().st_size > 10_000
     assert "found at 3 of 3" in capsys.readouterr().out
-
 
 
 SCRIPT_CACHE = """
@@ -113,8 +161,18 @@ def test_kneed_walker_gait_and_multipliers(capsys):
 
     import jax.numpy as jnp
 
-    rc = main(["gait", "--model", "kneed", "--method", "shooting",
-               "--slope-deg", "2.887707287459349", "--json"])
+    rc = main(
+        [
+            "gait",
+            "--model",
+            "kneed",
+            "--method",
+            "shooting",
+            "--slope-deg",
+            "2.887707287459349",
+            "--json",
+        ]
+    )
     assert rc == 0
     rec = json.loads(capsys.readouterr().out)
     assert rec["result"] == "successful" and rec["stable"] is True
@@ -123,7 +181,9 @@ def test_kneed_walker_gait_and_multipliers(capsys):
     kw = vj.KneedWalker()
     sim = vj.simulate(kw, jnp.asarray(rec["x0"]), 3)
     np.testing.assert_allclose(np.asarray(sim.steps.x_plus[-1]), rec["x0"], atol=1e-9)
-    ev = sorted(np.abs(np.asarray(rec["multipliers"])[:, 0] + 1j * np.asarray(rec["multipliers"])[:, 1]))
+    ev = sorted(
+        np.abs(np.asarray(rec["multipliers"])[:, 0] + 1j * np.asarray(rec["multipliers"])[:, 1])
+    )
     from vhcjax.stability import finite_difference_jacobian  # central differences
 
     ref = np.asarray(finite_difference_jacobian(kw, jnp.asarray(rec["z"])))

@@ -23,8 +23,11 @@ from vhcjax.cli import build_parser, main
 from vhcjax.cli._common import Parser, parse_range
 
 #: Arguments each command needs besides the flag under test.
-REQUIRED = {"sweep": ["--slope-deg", "2:3:0.5"], "bifurcation": ["--slope-deg", "2:3:0.5"],
-            "reproduce": ["--out", "/tmp/vhcjax-never-written"]}
+REQUIRED = {
+    "sweep": ["--slope-deg", "2:3:0.5"],
+    "bifurcation": ["--slope-deg", "2:3:0.5"],
+    "reproduce": ["--out", "/tmp/vhcjax-never-written"],
+}
 #: Checked after parsing by `model_from_args` (messages "--mass-hip must be positive").
 MODEL_FLAGS = {"--slope-deg", "--mass-hip", "--mass-leg", "--a", "--b", "--gravity"}
 
@@ -58,8 +61,9 @@ def _bad_values(action):
     return out
 
 
-CASES = [(cmd, a.option_strings[0], a.nargs, v) for cmd, a in _numeric_actions()
-         for v in _bad_values(a)]
+CASES = [
+    (cmd, a.option_strings[0], a.nargs, v) for cmd, a in _numeric_actions() for v in _bad_values(a)
+]
 
 
 def test_every_numeric_flag_is_checked():
@@ -77,8 +81,9 @@ def test_every_numeric_flag_is_checked():
     assert len(CASES) > 150
 
 
-@pytest.mark.parametrize("cmd, flag, nargs, value", CASES,
-                         ids=[f"{c} {f} {v}" for c, f, _, v in CASES])
+@pytest.mark.parametrize(
+    "cmd, flag, nargs, value", CASES, ids=[f"{c} {f} {v}" for c, f, _, v in CASES]
+)
 def test_bad_numeric_value_one_line_exit_2(capsys, cmd, flag, nargs, value):
     n = nargs if isinstance(nargs, int) else 1
     t0 = time.perf_counter()
@@ -91,16 +96,19 @@ def test_bad_numeric_value_one_line_exit_2(capsys, cmd, flag, nargs, value):
     assert time.perf_counter() - t0 < 5.0  # refused before any compilation
 
 
-@pytest.mark.parametrize("argv, message", [
-    (["basin", "--grid", "20000", "20000"], "at most 4,000,000"),
-    (["contraction", "--perturbations", "100000", "--steps", "100000"], "at most 50,000,000"),
-    (["sweep", "--slope-deg", "1:nan:0.5"], "finite"),
-    (["sweep", "--slope-deg", "1:2:0"], "STEP > 0"),
-    (["sweep", "--slope-deg", "1:1e9:1e-3"], "at most 100000"),
-    (["bifurcation", "--slope-deg", "29:31:1"], "(0, 30)"),
-    (["basin", "--axes", "q1,q1"], "two different"),
-    (["simulate", "--animate", "walk.mp4"], ".gif"),
-])
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["basin", "--grid", "20000", "20000"], "at most 4,000,000"),
+        (["contraction", "--perturbations", "100000", "--steps", "100000"], "at most 50,000,000"),
+        (["sweep", "--slope-deg", "1:nan:0.5"], "finite"),
+        (["sweep", "--slope-deg", "1:2:0"], "STEP > 0"),
+        (["sweep", "--slope-deg", "1:1e9:1e-3"], "at most 100000"),
+        (["bifurcation", "--slope-deg", "29:31:1"], "(0, 30)"),
+        (["basin", "--axes", "q1,q1"], "two different"),
+        (["simulate", "--animate", "walk.mp4"], ".gif"),
+    ],
+)
 def test_other_refusals(capsys, argv, message):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip()
@@ -126,12 +134,19 @@ def _unwritable_cases(tmp_path):
     missing = str(tmp_path / "missing" / "out")
     folder = str(tmp_path)  # an existing directory where a file is expected
     cases = []
-    for cmd, flag, ext in [("sweep", "--csv", "csv"), ("sweep", "--png", "png"),
-                           ("bifurcation", "--csv", "csv"), ("bifurcation", "--png", "png"),
-                           ("bifurcation", "--png-multipliers", "png"),
-                           ("multipliers", "--png", "png"), ("contraction", "--png", "png"),
-                           ("basin", "--png", "png"), ("slope-sensitivity", "--png", "png"),
-                           ("push", "--png", "png"), ("simulate", "--animate", "gif")]:
+    for cmd, flag, ext in [
+        ("sweep", "--csv", "csv"),
+        ("sweep", "--png", "png"),
+        ("bifurcation", "--csv", "csv"),
+        ("bifurcation", "--png", "png"),
+        ("bifurcation", "--png-multipliers", "png"),
+        ("multipliers", "--png", "png"),
+        ("contraction", "--png", "png"),
+        ("basin", "--png", "png"),
+        ("slope-sensitivity", "--png", "png"),
+        ("push", "--png", "png"),
+        ("simulate", "--animate", "gif"),
+    ]:
         for path in (f"{missing}.{ext}", f"/proc/vhcjax-test.{ext}", folder):
             if flag == "--animate" and path == folder:
                 continue  # refused for its suffix (tested above)
@@ -158,8 +173,15 @@ def test_json_never_holds_nan():
     import numpy as np
 
     nulls = []
-    out = to_jsonable({"a": float("nan"), "b": np.array([1.0, np.inf]),
-                       "c": [np.float64(-np.inf), 2], "d": np.array([1 + 1j, np.nan])}, nulls)
+    out = to_jsonable(
+        {
+            "a": float("nan"),
+            "b": np.array([1.0, np.inf]),
+            "c": [np.float64(-np.inf), 2],
+            "d": np.array([1 + 1j, np.nan]),
+        },
+        nulls,
+    )
     text = json.dumps(out, allow_nan=False)
     assert "NaN" not in text and "Infinity" not in text
     assert out["b"] == [1.0, None] and out["c"] == [None, 2]
@@ -183,9 +205,21 @@ def test_ctrl_c_stops_reproduce_at_once(tmp_path):
     env["PYTHONPATH"] = src + os.pathsep + env.get("PYTHONPATH", "")
     out = tmp_path / "out"
     proc = subprocess.Popen(
-        [sys.executable, "-c", "import sys; from vhcjax.cli import main; sys.exit(main())",
-         "reproduce", "--quick", "--quiet", "--out", str(out)],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        [
+            sys.executable,
+            "-c",
+            "import sys; from vhcjax.cli import main; sys.exit(main())",
+            "reproduce",
+            "--quick",
+            "--quiet",
+            "--out",
+            str(out),
+        ],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     time.sleep(6.0)
     assert proc.poll() is None, proc.communicate()
     t0 = time.perf_counter()

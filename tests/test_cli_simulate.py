@@ -7,13 +7,12 @@ import shutil
 import subprocess
 import sys
 
+import _paths  # noqa: F401  (puts benchmarks/ on sys.path)
 import numpy as np
 import pytest
+import scipy_reference as ref
 
 from vhcjax import cli
-
-import _paths  # noqa: F401  (puts benchmarks/ on sys.path)
-import scipy_reference as ref
 
 THESIS_7_5 = ["0.218669", "-0.323389", "-1.092386", "-0.377377"]
 
@@ -25,8 +24,9 @@ def run_cli(capsys, *argv):
 
 
 def test_json_output_matches_scipy_reference(capsys):
-    code, out, err = run_cli(capsys, "--slope-deg", "3", "--x0", *THESIS_7_5, "--steps", "3",
-                             "--json")
+    code, out, err = run_cli(
+        capsys, "--slope-deg", "3", "--x0", *THESIS_7_5, "--steps", "3", "--json"
+    )
     assert code == 0, err
     data = json.loads(out)  # exactly one JSON object on stdout
     assert data["result"] == "successful"
@@ -49,8 +49,9 @@ def test_table_output_and_default_start(capsys):
 
 def test_a_fall_is_reported_not_an_error(capsys):
     # Backward push: the walker falls back in the first step.
-    code, out, err = run_cli(capsys, "--x0", "0.1", str(-0.1 - 2 * math.radians(3)), "1.5",
-                             "0", "--steps", "3", "--json")
+    code, out, err = run_cli(
+        capsys, "--x0", "0.1", str(-0.1 - 2 * math.radians(3)), "1.5", "0", "--steps", "3", "--json"
+    )
     assert code == 0, err
     data = json.loads(out)
     assert data["result"] == "fell"
@@ -90,18 +91,23 @@ def test_bad_input_one_line_error_exit_2(capsys, argv, message):
 
 def test_installed_entry_point_subprocess():
     exe = shutil.which("vhcjax") or os.path.join(os.path.dirname(sys.executable), "vhcjax")
-    proc = subprocess.run([exe, "simulate", "--slope-deg", "45"], capture_output=True,
-                          text=True, timeout=300)
+    proc = subprocess.run(
+        [exe, "simulate", "--slope-deg", "45"], capture_output=True, text=True, timeout=300
+    )
     assert proc.returncode == 2
     assert proc.stdout == ""
-    assert proc.stderr.strip() == "vhcjax simulate: error: --slope-deg must be in (0, 30) degrees, got 45.0"
+    assert (
+        proc.stderr.strip()
+        == "vhcjax simulate: error: --slope-deg must be in (0, 30) degrees, got 45.0"
+    )
 
 
 @pytest.mark.slow
 def test_plots_and_animation_written(capsys, tmp_path):
     gif = tmp_path / "walker.gif"
-    code, out, err = run_cli(capsys, "--steps", "1", "--plots", str(tmp_path / "figs"),
-                             "--animate", str(gif))
+    code, out, err = run_cli(
+        capsys, "--steps", "1", "--plots", str(tmp_path / "figs"), "--animate", str(gif)
+    )
     assert code == 0, err
     for name in ("states.png", "phase.png", "periods.png"):
         data = (tmp_path / "figs" / name).read_bytes()

@@ -9,12 +9,25 @@ import pytest
 from vhcjax import cli
 
 
-@pytest.mark.parametrize("flags", [
-    ["--r", "nan"], ["--r", "-1"], ["--torque-limit", "-1"], ["--torque-limit", "inf"],
-    ["--perturbation", "inf"], ["--perturbation", "-0.1"], ["--q", "1,nan,1"],
-    ["--q", "1,2"], ["--q", "a,b,c"], ["--q", "0,0,0"], ["--steps", "0"],
-    ["--basin-grid", "1"], ["--slope-deg", "nan"], ["--model", "kneed"],
-])
+@pytest.mark.parametrize(
+    "flags",
+    [
+        ["--r", "nan"],
+        ["--r", "-1"],
+        ["--torque-limit", "-1"],
+        ["--torque-limit", "inf"],
+        ["--perturbation", "inf"],
+        ["--perturbation", "-0.1"],
+        ["--q", "1,nan,1"],
+        ["--q", "1,2"],
+        ["--q", "a,b,c"],
+        ["--q", "0,0,0"],
+        ["--steps", "0"],
+        ["--basin-grid", "1"],
+        ["--slope-deg", "nan"],
+        ["--model", "kneed"],
+    ],
+)
 def test_bad_input_is_one_line_exit_2(flags, capsys):
     assert cli.main(["stabilize", *flags]) == 2
     err = capsys.readouterr().err.strip()
@@ -27,19 +40,40 @@ def _no_constants(name):
 
 def test_stabilize_json_and_png(tmp_path, capsys):
     png = tmp_path / "stab.png"
-    argv = ["stabilize", "--slope-deg", "3", "--family", "unstable", "--torque-limit", "8",
-            "--basin", "--basin-grid", "9", "--json", "--png", str(png)]
+    argv = [
+        "stabilize",
+        "--slope-deg",
+        "3",
+        "--family",
+        "unstable",
+        "--torque-limit",
+        "8",
+        "--basin",
+        "--basin-grid",
+        "9",
+        "--json",
+        "--png",
+        str(png),
+    ]
     assert cli.main(argv) == 0
     out = json.loads(capsys.readouterr().out, parse_constant=_no_constants)
-    for key in ("result", "slope_deg", "family", "open_loop_multipliers",
-                "closed_loop_multipliers", "closed_loop_multipliers_transverse", "stable",
-                "max_gain", "simulation", "basin"):
+    for key in (
+        "result",
+        "slope_deg",
+        "family",
+        "open_loop_multipliers",
+        "closed_loop_multipliers",
+        "closed_loop_multipliers_transverse",
+        "stable",
+        "max_gain",
+        "simulation",
+        "basin",
+    ):
         assert key in out, key
     assert out["result"] == "successful" and out["stable"] is True
     assert out["slope_deg"] == 3.0 and out["family"] == "unstable"
     cl = np.array(out["closed_loop_multipliers"])
-    np.testing.assert_allclose(cl, np.array(out["closed_loop_multipliers_transverse"]),
-                               atol=1e-6)
+    np.testing.assert_allclose(cl, np.array(out["closed_loop_multipliers_transverse"]), atol=1e-6)
     assert np.max(np.hypot(cl[:, 0], cl[:, 1])) < 1
     ol = np.array(out["open_loop_multipliers"])
     assert np.max(np.hypot(ol[:, 0], ol[:, 1])) > 1

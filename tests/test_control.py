@@ -56,8 +56,11 @@ def test_input_enters_the_equations_of_motion(model):
     @jax.jit
     def residual(model, q, dq, u):
         ddq = vj.actuated_vector_field(model, jnp.concatenate([q, dq]), u)[2:]
-        return (vj.mass_matrix(model, q) @ ddq + vj.coriolis_matrix(model, q, dq) @ dq
-                + vj.gravity_vector(model, q))
+        return (
+            vj.mass_matrix(model, q) @ ddq
+            + vj.coriolis_matrix(model, q, dq) @ dq
+            + vj.gravity_vector(model, q)
+        )
 
     lhs = residual(model, q, dq, u)
     np.testing.assert_allclose(np.asarray(lhs), np.asarray(B @ u), atol=1e-12)
@@ -96,8 +99,12 @@ def test_riccati_two_ways(stabilized, name):
     J, Q = np.asarray(st.system.J), np.eye(3)
     np.testing.assert_allclose(X1[-1], J.T @ X1[0] @ J + Q, rtol=1e-10, atol=1e-8)
     assert np.min(np.linalg.eigvalsh(X1)) > 0
-    np.testing.assert_allclose(np.asarray(st.riccati.K), np.asarray(st.riccati_check.K),
-                               rtol=0, atol=1e-8 * np.max(np.abs(np.asarray(st.riccati.K))))
+    np.testing.assert_allclose(
+        np.asarray(st.riccati.K),
+        np.asarray(st.riccati_check.K),
+        rtol=0,
+        atol=1e-8 * np.max(np.abs(np.asarray(st.riccati.K))),
+    )
 
 
 @pytest.mark.parametrize("name", list(CASES))
@@ -147,8 +154,9 @@ def test_torque_is_zero_on_the_orbit(gaits, stabilized):
     m, z = gaits["unstable-3"]
     fb = stabilized["unstable-3"].feedback
     sysm = stabilized["unstable-3"].system
-    nodes = jnp.concatenate([(sysm.theta_plus + sysm.s * (sysm.theta_minus - sysm.theta_plus))
-                             [:, None], sysm.w], axis=1)
+    nodes = jnp.concatenate(
+        [(sysm.theta_plus + sysm.s * (sysm.theta_minus - sysm.theta_plus))[:, None], sysm.w], axis=1
+    )
     u_nodes = np.asarray(jax.vmap(lambda x: fb(x, m))(nodes))
     assert np.max(np.abs(u_nodes)) < 1e-12  # rounding
     # Along the orbit of the passive hybrid simulator (its own integration, 1e-12).
@@ -174,8 +182,13 @@ def test_saturated_feedback_converges_and_respects_the_limit(gaits, stabilized):
 def test_basin_grows_with_the_torque_limit(gaits, stabilized):
     m, z = gaits["unstable-3"]
     fb = stabilized["unstable-3"].feedback
-    kw = {"half_widths": (0.05, 0.3), "shape": (9, 9), "num_steps": 25, "torque_points": 8,
-              "config": vj.FAST_CONFIG}
+    kw = {
+        "half_widths": (0.05, 0.3),
+        "shape": (9, 9),
+        "num_steps": 25,
+        "torque_points": 8,
+        "config": vj.FAST_CONFIG,
+    }
     fractions = []
     for lim in (0.0, 0.5, 2.0, 8.0):
         b = vj.closed_loop_basin(m, vj.with_torque_limit(fb, lim), z, **kw)
@@ -213,7 +226,6 @@ def test_pushes_survived_with_and_without_feedback(gaits, stabilized):
     assert np.all(closed > 1.0)
     # The bisection's answer against a direct run: just below survives.
     p = 0.9 * closed[0, 0]
-    sr = eqx.filter_jit(vj.closed_loop_push_step)(m, st.feedback, x0, 0.2 * T,
-                                                  jnp.array([p, 0.0]))
+    sr = eqx.filter_jit(vj.closed_loop_push_step)(m, st.feedback, x0, 0.2 * T, jnp.array([p, 0.0]))
     sim = vj.simulate_closed_loop(m, sr.x_plus, st.feedback, 25)
     assert _errors(m, z, sim)[-1] < 1e-4

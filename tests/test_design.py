@@ -25,6 +25,7 @@ def test_flip_slope_derivative_vs_located_flips():
         return vj.flip_slope(eqx.tree_at(lambda m: m.mH, m0, mH), z0)
 
     d = float(jax.grad(flip)(10.0))
+
     # Richardson-extrapolated central differences of flips located by `flip_slopes`
     def located(mH):
         m = eqx.tree_at(lambda m: m.mH, m0, jnp.asarray(mH))
@@ -36,16 +37,16 @@ def test_flip_slope_derivative_vs_located_flips():
     fd = (4 * central(0.01) - central(0.02)) / 3
     assert abs(d - fd) < 1e-6 * abs(fd), (d, fd)
     # the located flip is the one of the existing bisection on det(I + J)
-    pd = vj.period_doubling_slope(math.radians(4.0), math.radians(4.8), z0, model=m0,
-                                  tol=1e-12)
+    pd = vj.period_doubling_slope(math.radians(4.0), math.radians(4.8), z0, model=m0, tol=1e-12)
     assert abs(math.degrees(float(flip(10.0)) - pd.psi)) < 1e-8
 
 
 def test_design_spectral_radius():
     m0 = vj.CompassGait()
     bounds = {"mass-hip": (6.0, 20.0)}
-    res = vj.design("spectral-radius", ["mass-hip"], model=m0, bounds=bounds, steps=25,
-                    learning_rate=0.1)
+    res = vj.design(
+        "spectral-radius", ["mass-hip"], model=m0, bounds=bounds, steps=25, learning_rate=0.1
+    )
     assert res.result in ("successful", "max_iterations")
     assert res.optimum["value"] < res.initial["value"]
     # re-solved from scratch (continuation from Table 1, no guess) gives the same value
@@ -78,20 +79,20 @@ def test_atlas_against_bifurcation_and_scaling():
         m = grid_model(mu[i], beta[j], psi=math.radians(3.0))
         z = _stable_z(m)
         f = at.flip_slope[i, j]
-        pd = vj.period_doubling_slope(math.radians(3.0), f + math.radians(0.2), z, model=m,
-                                      tol=1e-12)
+        pd = vj.period_doubling_slope(
+            math.radians(3.0), f + math.radians(0.2), z, model=m, tol=1e-12
+        )
         assert abs(math.degrees(f - pd.psi)) < 1e-4
         gm = vj.gait_spectrum(m, vj.find_gait(m, method="shooting", guess=z))
         assert abs(float(gm.spectral_radius) - at.spectral_radius[i, j]) < 1e-8
         lo, hi = at.stable_range[i, j]
         assert lo <= math.radians(3.0) < hi and abs(hi - f) < 1e-12
     # Table 1 is mu = 2, beta = 1: its flip is the thesis model's
-    pd = vj.period_doubling_slope(math.radians(4.0), math.radians(4.8),
-                                  _stable_z(vj.CompassGait()), tol=1e-12)
+    pd = vj.period_doubling_slope(
+        math.radians(4.0), math.radians(4.8), _stable_z(vj.CompassGait()), tol=1e-12
+    )
     assert abs(math.degrees(at.flip_slope[1, 1] - pd.psi)) < 1e-4
     # scaling invariance: other leg mass, leg length and gravity, same dimensionless walker
-    scaled = vj.atlas(mu, beta, slope=math.radians(3.0), mass_leg=2.0, leg_length=1.7,
-                      gravity=3.7)
-    np.testing.assert_allclose(np.degrees(scaled.flip_slope), np.degrees(at.flip_slope),
-                               atol=1e-6)
+    scaled = vj.atlas(mu, beta, slope=math.radians(3.0), mass_leg=2.0, leg_length=1.7, gravity=3.7)
+    np.testing.assert_allclose(np.degrees(scaled.flip_slope), np.degrees(at.flip_slope), atol=1e-6)
     np.testing.assert_allclose(scaled.spectral_radius, at.spectral_radius, atol=1e-8)

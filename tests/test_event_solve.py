@@ -30,8 +30,17 @@ def _thrown(h, v0, g, c, t0):
         return y[1] < -1e3
 
     sol = solve_to_event(
-        field, (ground, runaway), (False, None), jnp.stack([h, v0]), {"g": g}, t0, 10.0,
-        solver=diffrax.Tsit5(), rtol=1e-12, atol=1e-12, max_steps=4096,
+        field,
+        (ground, runaway),
+        (False, None),
+        jnp.stack([h, v0]),
+        {"g": g},
+        t0,
+        10.0,
+        solver=diffrax.Tsit5(),
+        rtol=1e-12,
+        atol=1e-12,
+        max_steps=4096,
     )
     assert sol.ys.shape == (1, 2) and sol.ts.shape == (1,)
     return jnp.stack([sol.ts[0], sol.ys[0, 1]]), sol
@@ -105,12 +114,18 @@ def test_second_derivatives_equal_differences_of_first_ones():
     checked against the closed form above)."""
 
     def first(g, c):
-        return jnp.stack(jax.jacfwd(lambda gg, cc: _thrown(H, V0, gg, cc, T0)[0],
-                                    argnums=(0, 1))(g, c), -1)
+        return jnp.stack(
+            jax.jacfwd(lambda gg, cc: _thrown(H, V0, gg, cc, T0)[0], argnums=(0, 1))(g, c), -1
+        )
 
     g, c = jnp.asarray(G), jnp.asarray(C)
     second = np.stack(jax.jacfwd(first, argnums=(0, 1))(g, c), -1)
     eps = 1e-5
-    fd = np.stack([(first(g + eps, c) - first(g - eps, c)) / (2 * eps),
-                   (first(g, c + eps) - first(g, c - eps)) / (2 * eps)], -1)
+    fd = np.stack(
+        [
+            (first(g + eps, c) - first(g - eps, c)) / (2 * eps),
+            (first(g, c + eps) - first(g, c - eps)) / (2 * eps),
+        ],
+        -1,
+    )
     np.testing.assert_allclose(second, fd, rtol=1e-6, atol=1e-8)

@@ -39,35 +39,54 @@ def _sweep():
 def _basin():
     label = np.full((6, 5), CONVERGED)
     label[0, :] = FELL
-    return SimpleNamespace(axes=(0, 1), z_star=np.array([0.22, -1.09, -0.38]),
-                           offsets_x=np.linspace(-0.05, 0.05, 5),
-                           offsets_y=np.linspace(-0.3, 0.3, 6), label=label,
-                           steps=RNG.integers(1, 20, (6, 5)), tol=1e-4, area=0.01,
-                           fraction=0.8)
+    return SimpleNamespace(
+        axes=(0, 1),
+        z_star=np.array([0.22, -1.09, -0.38]),
+        offsets_x=np.linspace(-0.05, 0.05, 5),
+        offsets_y=np.linspace(-0.3, 0.3, 6),
+        label=label,
+        steps=RNG.integers(1, 20, (6, 5)),
+        tol=1e-4,
+        area=0.01,
+        fraction=0.8,
+    )
 
 
 def _contraction():
     d = 1e-3 * 0.58 ** np.arange(12)[None, :] * (1 + 0.1 * RNG.random((4, 12)))
-    return SimpleNamespace(distance=d, spectral_radius=0.58, measured_rate=0.57,
-                           steps_10x=4.2, steps_100x=8.4)
+    return SimpleNamespace(
+        distance=d, spectral_radius=0.58, measured_rate=0.57, steps_10x=4.2, steps_100x=8.4
+    )
 
 
 def _terrain():
     T = 0.73 + 0.01 * RNG.random((2, 8))
-    return (np.array([-0.005, 0.002]),
-            SimpleNamespace(step_times=T, distance=1e-3 * 0.6 ** np.arange(9)[None] * np.ones((2, 1)),
-                            label=np.array([0, 0])), 0.734)
+    return (
+        np.array([-0.005, 0.002]),
+        SimpleNamespace(
+            step_times=T,
+            distance=1e-3 * 0.6 ** np.arange(9)[None] * np.ones((2, 1)),
+            label=np.array([0, 0]),
+        ),
+        0.734,
+    )
 
 
 def _slope():
-    return SimpleNamespace(dz=np.array([0.5, -1.2, 3.0]), dperiod=0.3, dstep_length=0.8,
-                           dspeed=1.1, dmodulus=np.array([2.0, 2.0, -0.3]))
+    return SimpleNamespace(
+        dz=np.array([0.5, -1.2, 3.0]),
+        dperiod=0.3,
+        dstep_length=0.8,
+        dspeed=1.1,
+        dmodulus=np.array([2.0, 2.0, -0.3]),
+    )
 
 
 def _bif():
     psi = np.radians(np.linspace(4, 5, 6))
-    return SimpleNamespace(psi=psi, periods=0.7 + 0.01 * RNG.random((6, 8)),
-                           fell=np.array([False] * 5 + [True]))
+    return SimpleNamespace(
+        psi=psi, periods=0.7 + 0.01 * RNG.random((6, 8)), fell=np.array([False] * 5 + [True])
+    )
 
 
 ev = np.array([-0.2 + 0.54j, -0.2 - 0.54j, 0.13])
@@ -75,27 +94,46 @@ ev = np.array([-0.2 + 0.54j, -0.2 - 0.54j, 0.13])
 #: name -> (call returning a figure, words its axis labels must hold)
 FIGURES = {
     "plot_states": (lambda: P.plot_states(_sim(), case=CASE), ["angle", "velocity", "time"]),
-    "plot_phase_portrait": (lambda: P.plot_phase_portrait(_sim(), case=CASE),
-                            ["angle", "velocity"]),
-    "plot_step_periods": (lambda: P.plot_step_periods(_sim(), case=CASE),
-                          ["step number", "period"]),
+    "plot_phase_portrait": (
+        lambda: P.plot_phase_portrait(_sim(), case=CASE),
+        ["angle", "velocity"],
+    ),
+    "plot_step_periods": (
+        lambda: P.plot_step_periods(_sim(), case=CASE),
+        ["step number", "period"],
+    ),
     "plot_sweep": (lambda: P.plot_sweep(_sweep(), case=CASE), ["slope", "speed", "period"]),
     "plot_basin": (lambda: P.plot_basin(_basin(), case=CASE), ["q_1", "dot q_1"]),
-    "plot_contraction": (lambda: P.plot_contraction(_contraction(), case=CASE),
-                         ["step", "x_k - x^*"]),
+    "plot_contraction": (
+        lambda: P.plot_contraction(_contraction(), case=CASE),
+        ["step", "x_k - x^*"],
+    ),
     "plot_terrain": (lambda: P.plot_terrain(*_terrain(), case=CASE), ["step time", "x_k"]),
-    "plot_push": (lambda: P.plot_push(np.linspace(0, 0.75, 4), RNG.random((4, 4, 2)),
-                                      np.radians([0, 180]), RNG.random((4, 2)), case=CASE),
-                  ["phase", "largest push"]),
-    "plot_slope": (lambda: P.plot_slope(_slope(), case=CASE),
-                   ["rad / deg", "rad/s / deg", "s / deg", "m / deg", "m/s / deg"]),
+    "plot_push": (
+        lambda: P.plot_push(
+            np.linspace(0, 0.75, 4),
+            RNG.random((4, 4, 2)),
+            np.radians([0, 180]),
+            RNG.random((4, 2)),
+            case=CASE,
+        ),
+        ["phase", "largest push"],
+    ),
+    "plot_slope": (
+        lambda: P.plot_slope(_slope(), case=CASE),
+        ["rad / deg", "rad/s / deg", "s / deg", "m / deg", "m/s / deg"],
+    ),
     "plot_multipliers_complex": (
-        lambda: P.plot_multipliers_complex([ev], ["Poincare"], title=CASE), ["Re", "Im"]),
+        lambda: P.plot_multipliers_complex([ev], ["Poincare"], title=CASE),
+        ["Re", "Im"],
+    ),
     "plot_multipliers_vs_slope": (
-        lambda: P.plot_multipliers_vs_slope(np.linspace(1, 5, 5), {"stable": np.tile(ev, (5, 1))},
-                                            case=CASE), ["slope", "multiplier"]),
-    "plot_bifurcation": (lambda: P.plot_bifurcation(_bif(), case=CASE),
-                         ["slope", "step period"]),
+        lambda: P.plot_multipliers_vs_slope(
+            np.linspace(1, 5, 5), {"stable": np.tile(ev, (5, 1))}, case=CASE
+        ),
+        ["slope", "multiplier"],
+    ),
+    "plot_bifurcation": (lambda: P.plot_bifurcation(_bif(), case=CASE), ["slope", "step period"]),
 }
 
 
@@ -126,7 +164,8 @@ def test_figure_draws_what_its_name_says(name):
         for w in words:
             assert w in text, (name, w, text)
         titles = [ax.get_title() for ax in panels] + [
-            fig._suptitle.get_text() if fig._suptitle else ""]
+            fig._suptitle.get_text() if fig._suptitle else ""
+        ]
         assert any(CASE in t for t in titles), (name, titles)
     finally:
         plt.close(fig)

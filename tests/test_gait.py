@@ -10,12 +10,9 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax import gait as G
-from vhcjax import solvers as S
-from vhcjax.gait import _find
-from vhcjax.gait import _problem1
-from vhcjax.gait import _shooting
-from vhcjax.gait import _vhc as _vhc
+from vhcjax import gait as G, solvers as S
+from vhcjax.gait import _find, _problem1, _shooting, _vhc as _vhc
+
 SEED = (0.20, -1.0)  # thesis (7.2)
 SLOPES_DEG = (2.0, 3.0, 4.0)
 
@@ -83,15 +80,35 @@ def test_energy_bookkeeping(gaits, deg):
         drop = mt * float(m.g) * float(g.step_length) * math.sin(float(m.psi))
         np.testing.assert_allclose(float(g.energy_loss), drop, rtol=1e-9)
         # Step length from the leg geometry: 2 l sin((g - c)/2).
-        np.testing.assert_allclose(float(g.step_length), 2 * float(m.l) * math.sin((float(g.g) - float(g.c)) / 2), rtol=1e-12)
+        np.testing.assert_allclose(
+            float(g.step_length),
+            2 * float(m.l) * math.sin((float(g.g) - float(g.c)) / 2),
+            rtol=1e-12,
+        )
         np.testing.assert_allclose(float(g.speed), float(g.step_length) / float(g.T), rtol=1e-14)
 
 
 # Thesis values and how far (in units of the last printed digit) the thesis is from ours.
-THESIS_7_4 = dict(a=(0.218669, 0), b=(-1.092386, 2), c=(-0.323389, 0), d=(-1.494206, 1),
-                  e=(-0.323389, 0), f=(-0.377377, 3), g=(0.218669, 0), h=(-1.805654, 25))
-THESIS_7_9 = dict(a=(0.204676, 0), b=(-1.210571, 1), c=(-0.309396, 1), d=(-1.395725, 3),
-                  e=(-0.309396, 1), f=(-0.712484, 5), g=(0.204676, 0), h=(-0.087282, 17))
+THESIS_7_4 = dict(
+    a=(0.218669, 0),
+    b=(-1.092386, 2),
+    c=(-0.323389, 0),
+    d=(-1.494206, 1),
+    e=(-0.323389, 0),
+    f=(-0.377377, 3),
+    g=(0.218669, 0),
+    h=(-1.805654, 25),
+)
+THESIS_7_9 = dict(
+    a=(0.204676, 0),
+    b=(-1.210571, 1),
+    c=(-0.309396, 1),
+    d=(-1.395725, 3),
+    e=(-0.309396, 1),
+    f=(-0.712484, 5),
+    g=(0.204676, 0),
+    h=(-0.087282, 17),
+)
 
 
 @pytest.mark.parametrize("fam,table", [("stable", THESIS_7_4), ("unstable", THESIS_7_9)])
@@ -123,9 +140,10 @@ def test_uphill_solution_is_found_and_flagged():
     assert float(g.residual) < 1e-10
     assert float(g.T) < 0
     # (7.18): q1 = 0.204676, q2 = -0.309396, dq1 = 1.210571, dq2 = 0.712484
-    np.testing.assert_allclose(np.asarray(g.x_plus), [0.204676, -0.309396, 1.210571, 0.712484],
-                               atol=6e-6)
-    with pytest.raises(Exception):
+    np.testing.assert_allclose(
+        np.asarray(g.x_plus), [0.204676, -0.309396, 1.210571, 0.712484], atol=6e-6
+    )
+    with pytest.raises(Exception):  # noqa: B017 (equinox raises its own runtime error type)
         G.find_gait(m, "stable", guess=(0.20, 1.0), throw=True).a.block_until_ready()
 
 
@@ -139,11 +157,15 @@ def test_batch_equals_unbatched_and_flags_hopeless(gaits):
     names = vj.result_names(b.result)
     assert names[:2] == ["successful", "successful"]
     assert names[2] != "successful" and names[3] != "successful"
-    np.testing.assert_allclose(np.asarray(b.x_plus[0]), np.asarray(gaits[3.0, "stable", "vhc"].x_plus), atol=1e-12)
-    np.testing.assert_allclose(np.asarray(b.x_plus[1]), np.asarray(gaits[2.0, "stable", "vhc"].x_plus), atol=1e-10)
+    np.testing.assert_allclose(
+        np.asarray(b.x_plus[0]), np.asarray(gaits[3.0, "stable", "vhc"].x_plus), atol=1e-12
+    )
+    np.testing.assert_allclose(
+        np.asarray(b.x_plus[1]), np.asarray(gaits[2.0, "stable", "vhc"].x_plus), atol=1e-10
+    )
     assert np.all(np.isfinite(np.asarray(b.x_plus)))  # never a silent NaN
     for i in (1, 3):
-        one = G.find_gaits(m, guesses[i:i + 1], "stable", psi=psi[i:i + 1])
+        one = G.find_gaits(m, guesses[i : i + 1], "stable", psi=psi[i : i + 1])
         np.testing.assert_allclose(np.asarray(b.x_plus[i]), np.asarray(one.x_plus[0]), atol=1e-10)
         assert names[i] == vj.result_names(one.result)[0]
 
@@ -164,8 +186,9 @@ def test_chord_finish_gives_the_newton_gaits_and_codes(gaits, method):
     assert vj.result_names(chord.result) == vj.result_names(full.result)
     assert vj.result_names(chord.result)[:2] == ["successful", "successful"]
     ok = np.asarray(full.result == vj.RESULTS.successful)
-    np.testing.assert_allclose(np.asarray(chord.x_plus)[ok], np.asarray(full.x_plus)[ok],
-                               atol=1e-10)
+    np.testing.assert_allclose(
+        np.asarray(chord.x_plus)[ok], np.asarray(full.x_plus)[ok], atol=1e-10
+    )
     one = gaits[3.0, "stable", method]  # unbatched, full Newton
     np.testing.assert_allclose(np.asarray(chord.x_plus[0]), np.asarray(one.x_plus), atol=1e-10)
     assert float(jnp.max(chord.residual[:2])) < 1e-10
@@ -178,11 +201,13 @@ def test_batched_search_under_jit_equals_the_direct_call():
     guesses = jnp.array([SEED, SEED, (2.5, 8.0), (0.2, 0.0)])
     psi = jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0]))
     direct = G.find_gaits(vj.CompassGait(), guesses, "stable", psi=psi, chord=True)
-    under_jit = jax.jit(lambda p: G.find_gaits(vj.CompassGait(), guesses, "stable", psi=p,
-                                               chord=True))(psi)
+    under_jit = jax.jit(
+        lambda p: G.find_gaits(vj.CompassGait(), guesses, "stable", psi=p, chord=True)
+    )(psi)
     assert vj.result_names(under_jit.result) == vj.result_names(direct.result)
-    np.testing.assert_allclose(np.asarray(under_jit.x_plus)[:2], np.asarray(direct.x_plus)[:2],
-                               atol=1e-12)
+    np.testing.assert_allclose(
+        np.asarray(under_jit.x_plus)[:2], np.asarray(direct.x_plus)[:2], atol=1e-12
+    )
 
 
 def test_newton_stops_a_member_that_cannot_move():
@@ -200,7 +225,9 @@ def test_newton_stops_a_member_that_cannot_move():
     x, r, _, k = S.damped_newton(fn, x0)
     assert len(calls) == 3 and int(k) == 0
     np.testing.assert_array_equal(np.asarray(x), np.asarray(x0))
-    x, r, _, k = S.damped_newton(lambda y: (y**2 - jnp.array([2.0, 3.0]), None), jnp.array([1.4, 1.7]))
+    x, r, _, k = S.damped_newton(
+        lambda y: (y**2 - jnp.array([2.0, 3.0]), None), jnp.array([1.4, 1.7])
+    )
     np.testing.assert_allclose(np.asarray(x), np.sqrt([2.0, 3.0]), rtol=1e-12)
 
 
@@ -214,8 +241,12 @@ def test_phi_field_stops_where_the_ode_is_singular():
     args = (m, ref.E0, jnp.sign(ref.b))
     rate = _problem1._phi_field(ref.a, y, args)
     ddphi, _, dth2, _ = _vhc.phi_second_derivative(m, ref.E0, ref.a, y[0:1], y[1:2])
-    np.testing.assert_allclose(np.asarray(rate), [y[1], ddphi[0], -1 / np.sqrt(dth2), 0.0], rtol=1e-14)
-    low = _problem1._phi_field(ref.a, y, (m, ref.E0 - 100.0, jnp.sign(ref.b)))  # below the potential
+    np.testing.assert_allclose(
+        np.asarray(rate), [y[1], ddphi[0], -1 / np.sqrt(dth2), 0.0], rtol=1e-14
+    )
+    low = _problem1._phi_field(
+        ref.a, y, (m, ref.E0 - 100.0, jnp.sign(ref.b))
+    )  # below the potential
     assert np.asarray(low).tolist() == [0.0, 0.0, 0.0, 1.0]
 
 
@@ -253,7 +284,9 @@ def test_large_batches_run_in_chunks_with_the_same_results(monkeypatch, workers)
     chunked = G.find_gaits(m, guesses, "stable", psi=psi)
     assert vj.result_names(chunked.result) == vj.result_names(whole.result)
     assert chunked.x_plus.shape == whole.x_plus.shape == (5, 4)
-    np.testing.assert_allclose(np.asarray(chunked.x_plus), np.asarray(whole.x_plus), rtol=1e-12, atol=1e-14)
+    np.testing.assert_allclose(
+        np.asarray(chunked.x_plus), np.asarray(whole.x_plus), rtol=1e-12, atol=1e-14
+    )
     np.testing.assert_allclose(np.asarray(chunked.T), np.asarray(whole.T), rtol=1e-12)
 
 
@@ -284,8 +317,13 @@ _shoot_J = eqx.filter_jit(jax.jacfwd(lambda m, x: _shooting._shoot_eval(m, x)[0]
 
 
 def _central(r, x, h):
-    return np.stack([(np.asarray(r(x + h * e)) - np.asarray(r(x - h * e))) / (2 * h)
-                     for e in np.eye(x.shape[0])], axis=1)
+    return np.stack(
+        [
+            (np.asarray(r(x + h * e)) - np.asarray(r(x - h * e))) / (2 * h)
+            for e in np.eye(x.shape[0])
+        ],
+        axis=1,
+    )
 
 
 @pytest.mark.parametrize("fam", ["stable", "unstable"])
@@ -352,8 +390,9 @@ def test_inexact_newton_ends_only_at_the_final_tolerance():
     # residual carries its error.
     _, r1, tol1, _ = S.damped_newton(fn, x0, max_steps=0, tolerances=(1e-3, 1e-12))
     assert float(tol1) == 1e-3
-    x_exact, _, _, _ = S.damped_newton(lambda y: (y**2 - target + 1e-12, None), x0,
-                                           rtol=1e-14, atol=1e-14)
+    x_exact, _, _, _ = S.damped_newton(
+        lambda y: (y**2 - target + 1e-12, None), x0, rtol=1e-14, atol=1e-14
+    )
     np.testing.assert_allclose(np.asarray(x), np.asarray(x_exact), rtol=1e-15)
 
 
@@ -367,18 +406,31 @@ def test_batched_newton_equals_newton_on_each_member():
     def fn(x, tol, t):
         return x**2 - t + tol, tol
 
-    for kw in ({}, {"tolerances": (1e-3, 1e-12)}, {"tolerances": (1e-3, 1e-12), "chord_below": 1e-2}):
-        tol_fn = (lambda X, T: fn(X, T[:, None], targets)) if kw else (lambda X, T: fn(X, 0.0 * X, targets))
+    for kw in (
+        {},
+        {"tolerances": (1e-3, 1e-12)},
+        {"tolerances": (1e-3, 1e-12), "chord_below": 1e-2},
+    ):
+        tol_fn = (
+            (lambda X, T: fn(X, T[:, None], targets))
+            if kw
+            else (lambda X, T: fn(X, 0.0 * X, targets))
+        )
         X, R, aux, k = S.damped_newton_batch(tol_fn, X0, rtol=1e-13, atol=1e-13, **kw)
         for i in range(4):
-            one = ((lambda x, tol, i=i: fn(x, tol, targets[i])) if kw
-                   else (lambda x, i=i: fn(x, 0.0 * x, targets[i])))
+            one = (
+                (lambda x, tol, i=i: fn(x, tol, targets[i]))
+                if kw
+                else (lambda x, i=i: fn(x, 0.0 * x, targets[i]))
+            )
             x, r, _, ki = S.damped_newton(one, X0[i], rtol=1e-13, atol=1e-13, **kw)
             np.testing.assert_allclose(np.asarray(X[i]), np.asarray(x), rtol=1e-15, atol=1e-15)
             np.testing.assert_allclose(np.asarray(R[i]), np.asarray(r), rtol=1e-15, atol=1e-15)
             assert int(k[i]) == int(ki)
         assert len(set(np.asarray(k).tolist())) > 1  # the members did stop at different steps
-        np.testing.assert_allclose(np.asarray(X)[[0, 1, 3]] ** 2, np.asarray(targets)[[0, 1, 3]], rtol=1e-11)
+        np.testing.assert_allclose(
+            np.asarray(X)[[0, 1, 3]] ** 2, np.asarray(targets)[[0, 1, 3]], rtol=1e-11
+        )
         assert np.all(np.isfinite(np.asarray(X)))
 
 
@@ -390,8 +442,12 @@ def test_batch_jacobian_matches_finite_differences(gaits, fam):
     g = gaits[3.0, fam, "vhc"]
     sign = G.family_sign(fam)
     psi = jnp.radians(jnp.array([3.0, 3.0, 2.5]))
-    ab = jnp.stack([jnp.stack([g.a, g.b])] * 3) + jnp.array([[0.0, 0.0], [0.004, -0.01], [0.0, 0.0]])
-    fn = lambda X: jax.vmap(lambda p, x: _problem1._vhc_eval(vj.CompassGait(psi=p), x, sign))(psi, X)  # noqa: E731
+    ab = jnp.stack([jnp.stack([g.a, g.b])] * 3) + jnp.array(
+        [[0.0, 0.0], [0.004, -0.01], [0.0, 0.0]]
+    )
+    fn = lambda X: jax.vmap(lambda p, x: _problem1._vhc_eval(vj.CompassGait(psi=p), x, sign))(
+        psi, X
+    )  # noqa: E731
     R, J, _ = eqx.filter_jit(lambda X: S.batch_jacobian(fn, X))(ab)
     for i in range(3):
         m = vj.CompassGait(psi=psi[i])
@@ -400,7 +456,9 @@ def test_batch_jacobian_matches_finite_differences(gaits, fam):
         np.testing.assert_allclose(np.asarray(R[i]), np.asarray(_vhc_r(m, ab[i], sign)), atol=1e-13)
 
 
-@pytest.mark.parametrize("fam, deg", [("stable", 0.5 + 22 * 5.5 / 63), ("unstable", 0.5 + 59 * 5.5 / 63)])
+@pytest.mark.parametrize(
+    "fam, deg", [("stable", 0.5 + 22 * 5.5 / 63), ("unstable", 0.5 + 59 * 5.5 / 63)]
+)
 def test_converged_gaits_close_well_inside_the_success_test(fam, deg):
     """The Newton-step convergence test (the step from a point, J^-1 r, below rtol) also
     needs |r| < SUCCESS_TOL / 10: with a large Jacobian a tiny step can leave a residual

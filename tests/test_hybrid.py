@@ -9,18 +9,17 @@ and applies the angular-momentum impact map (3.17): no JAX, no autodiff, no diff
 import collections
 import math
 
+import _paths  # noqa: F401  (puts benchmarks/ on sys.path)
+import _sim
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import scipy_reference as ref
 
 import vhcjax as vj
 from vhcjax.hybrid._simulate import step_unchecked
-
-import _paths  # noqa: F401  (puts benchmarks/ on sys.path)
-import _sim
-import scipy_reference as ref
 
 GAIT_PERIOD = 0.73434639  # measured; checked below against the scipy reference
 
@@ -120,8 +119,9 @@ def test_vmap_1000_states_fallers_flagged_others_identical(big_batch):
     rng = np.random.default_rng(3)
     fallers = np.flatnonzero(names != "successful")
     walkers = np.flatnonzero(names == "successful")
-    sample = np.concatenate([rng.choice(fallers, 4, replace=False),
-                             rng.choice(walkers, 3, replace=False), [0, 7]])
+    sample = np.concatenate(
+        [rng.choice(fallers, 4, replace=False), rng.choice(walkers, 3, replace=False), [0, 7]]
+    )
     for i in sample:
         model = _sim.make_model(slopes[i])
         one = _sim.walk(model, x0[i])
@@ -133,19 +133,24 @@ def test_vmap_1000_states_fallers_flagged_others_identical(big_batch):
         for field in ("x_plus", "x_minus", "period"):
             np.testing.assert_allclose(
                 np.asarray(getattr(one.steps, field))[:k],
-                np.asarray(getattr(sim.steps, field))[i, :k], rtol=1e-13, atol=1e-13,
+                np.asarray(getattr(sim.steps, field))[i, :k],
+                rtol=1e-13,
+                atol=1e-13,
             )
         # Independently, the scipy reference fails (or not) at the same step.
         r = ref.simulate(ref.Params(psi=math.radians(slopes[i])), x0[i], _sim.NUM_STEPS)
         assert sum(s.ok for s in r) == k, (i, names[i], k, [s.ok for s in r])
         if k:
-            np.testing.assert_allclose(float(sim.steps.period[i, k - 1]), r[k - 1].period,
-                                       atol=1e-8)
+            np.testing.assert_allclose(
+                float(sim.steps.period[i, k - 1]), r[k - 1].period, atol=1e-8
+            )
         if names[i] == "fell":
             # Falling means hip at/below the slope or legs out of range at x_minus.
             xm = np.asarray(sim.steps.x_minus[i, k])
-            assert (math.cos(xm[0] + math.radians(slopes[i])) < 1e-6
-                    or abs(xm[1] - xm[0]) > math.pi - 1e-6), xm
+            assert (
+                math.cos(xm[0] + math.radians(slopes[i])) < 1e-6
+                or abs(xm[1] - xm[0]) > math.pi - 1e-6
+            ), xm
 
 
 def test_vmap_over_slope_matches_scipy(big_batch):
@@ -156,8 +161,9 @@ def test_vmap_over_slope_matches_scipy(big_batch):
         r = ref.simulate(par, x0[i], 3)
         k = min(3, int(sim.num_successful[i]))
         assert sum(s.ok for s in r) >= k
-        np.testing.assert_allclose(np.asarray(sim.steps.period[i, :k]),
-                                   [s.period for s in r[:k]], atol=1e-8)
+        np.testing.assert_allclose(
+            np.asarray(sim.steps.period[i, :k]), [s.period for s in r[:k]], atol=1e-8
+        )
     # Different slopes give different gaits: the batch really varies the parameter.
     assert np.ptp(np.asarray(sim.steps.period[:8, 0])) > 1e-2
 
@@ -174,7 +180,8 @@ def test_failure_codes_fell_bad_impact_nonfinite_no_impact():
     x0 = np.stack([FALL_X0, BAD_IMPACT_X0, [np.nan, 0, 0, 0], rest] + [_sim.THESIS_7_5] * 4)
     out = _sim.step_batch(_sim.batch_models([3.0] * 8), jnp.asarray(x0))
     assert vj.result_names(out.result) == (
-        ["fell", "bad_impact", "nonfinite", "no_impact"] + ["successful"] * 4)
+        ["fell", "bad_impact", "nonfinite", "no_impact"] + ["successful"] * 4
+    )
     assert abs(float(out.period[3]) - 10 * math.sqrt(1.0 / 9.81)) < 1e-9  # the time limit
     assert np.all(np.isfinite(np.asarray(out.x_plus)))  # never NaN, even for NaN input
     par = ref.Params()
@@ -195,7 +202,8 @@ def test_failure_codes_fell_bad_impact_nonfinite_no_impact():
         return m_stance * vs + par.mH * vh + m_swing * vw
 
     F = momentum(r.x_plus[:2], r.x_plus[2:], par.m2, par.m1) - momentum(
-        r.x_minus[:2], r.x_minus[2:], par.m1, par.m2)
+        r.x_minus[:2], r.x_minus[2:], par.m1, par.m2
+    )
     normal = np.array([math.sin(par.psi), math.cos(par.psi)])
     assert F @ normal < 0
 
@@ -250,6 +258,7 @@ def test_simulate_batch_splits_over_host_workers(monkeypatch):
     assert batch.steps.x_plus.shape == (5, 3, 4)
     for i in range(5):
         one = vj.simulate(m, X[i], 3, config=vj.FAST_CONFIG)
-        np.testing.assert_allclose(np.asarray(batch.steps.x_plus[i]), np.asarray(one.steps.x_plus),
-                                   rtol=1e-12, atol=1e-13)
+        np.testing.assert_allclose(
+            np.asarray(batch.steps.x_plus[i]), np.asarray(one.steps.x_plus), rtol=1e-12, atol=1e-13
+        )
         assert vj.result_names(batch.result)[i] == vj.result_names(one.result)

@@ -41,10 +41,12 @@ def richardson(f, p, rel=2e-3):
     cols = []
     for i in range(len(p)):
         h = rel * abs(p[i])
+
         def d(h):
             e = np.zeros(len(p))
             e[i] = h
             return (np.asarray(f(p + e)) - np.asarray(f(p - e))) / (2 * h)
+
         cols.append((4 * d(h / 2) - d(h)) / 3)
     return np.stack(cols, axis=-1)
 
@@ -74,8 +76,14 @@ def test_forward_and_reverse_agree_and_batch():
 
     (v, gs), dv = jax.value_and_grad(total_speed, has_aux=True)(10.0)
     assert (gs.result == vj.RESULTS.successful).all()
-    each = [float(jax.grad(lambda m: outputs(
-        jnp.asarray(TABLE1).at[2].set(m).at[6].set(s), "vhc")[5])(10.0)) for s in psis]
+    each = [
+        float(
+            jax.grad(lambda m: outputs(jnp.asarray(TABLE1).at[2].set(m).at[6].set(s), "vhc")[5])(
+                10.0
+            )
+        )
+        for s in psis
+    ]
     np.testing.assert_allclose(float(dv), sum(each), rtol=1e-9)
 
 
@@ -96,6 +104,7 @@ def test_failed_member_has_zero_derivative_and_keeps_code():
 def test_multiplier_derivatives_vs_richardson():
     """Eigenvalue perturbation (complex pair included) and the spectral radius, through
     `find_gait` and `gait_spectrum`, against re-solved gaits; forward against reverse."""
+
     def spec(p):
         m = model_of(p)
         g = vj.find_gait(m, method="shooting", guess=seed("shooting"))
@@ -110,12 +119,14 @@ def test_multiplier_derivatives_vs_richardson():
     scale = np.maximum(np.abs(fd), 1e-3 * np.abs(fd).max())
     assert np.max(np.abs(J - fd) / scale) < 1e-6, np.max(np.abs(J - fd) / scale)
     rho = lambda p: spec(p)[3]
-    np.testing.assert_allclose(np.asarray(jax.grad(rho)(p)), J[3], rtol=1e-10,
-                               atol=1e-12 * np.abs(J[3]).max())
+    np.testing.assert_allclose(
+        np.asarray(jax.grad(rho)(p)), J[3], rtol=1e-10, atol=1e-12 * np.abs(J[3]).max()
+    )
 
 
 def test_implicit_outputs_generic():
     """The mechanism on an equation with a known solution: r(z, p) = z^3 + p z - 1."""
+
     def fn(z, p):
         return z**3 + p * z - 1.0, {"z2": z**2}
 
@@ -141,7 +152,10 @@ def test_implicit_outputs_generic():
     _, dl = jax.jvp(eigenvalues, (A,), (dA,))
     h = 1e-6
     lp, lm = np.linalg.eigvals(np.asarray(A + h * dA)), np.linalg.eigvals(np.asarray(A - h * dA))
-    lp, lm = lp[np.argsort(-np.abs(lp) - 1e-9 * np.imag(lp))], lm[np.argsort(-np.abs(lm) - 1e-9 * np.imag(lm))]
+    lp, lm = (
+        lp[np.argsort(-np.abs(lp) - 1e-9 * np.imag(lp))],
+        lm[np.argsort(-np.abs(lm) - 1e-9 * np.imag(lm))],
+    )
     lam = np.asarray(eigenvalues(A))
     for i in range(3):
         jp = np.argmin(np.abs(lp - lam[i]))

@@ -8,10 +8,10 @@ import numpy as np
 import pytest
 
 import vhcjax
-from vhcjax.hybrid import _poincare as P
-from vhcjax.models._kneed_walker import KneedWalker
-from vhcjax.hybrid._multidomain import multidomain_trajectory
 from vhcjax._results import RESULTS
+from vhcjax.hybrid import _poincare as P
+from vhcjax.hybrid._multidomain import multidomain_trajectory
+from vhcjax.models._kneed_walker import KneedWalker
 
 fixed_point_jit = P.fixed_point_jit
 jacobian_jit = P.jacobian_jit
@@ -63,6 +63,7 @@ def test_energy_conserved_within_each_phase_and_lost_at_impacts(kw, gait):
     # the knee stays locked in domain 1 (constraint drift)
     np.testing.assert_allclose(xs[1, :, 1], xs[1, :, 2], atol=1e-9)
     np.testing.assert_allclose(xs[1, :, 4], xs[1, :, 5], atol=1e-9)
+
     # both impacts dissipate kinetic energy (the heel-strike post-impact state is in the
     # new labelling, whose pinned stance foot is at rest, so its kinetic energy is the true one)
     def kinetic(x):
@@ -82,14 +83,16 @@ def test_impacts_at_the_gait_conserve_angular_momentum(kw, gait):
     q, dq = x[:3], x[3:]
     dqp = info.x_start[1][3:]
     np.testing.assert_allclose(
-        kw.angular_momentum(q, dqp, jnp.zeros(2)), kw.angular_momentum(q, dq, jnp.zeros(2)),
+        kw.angular_momentum(q, dqp, jnp.zeros(2)),
+        kw.angular_momentum(q, dq, jnp.zeros(2)),
         rtol=1e-12,
     )
-    np.testing.assert_allclose(kw.swing_leg_momentum(q, dqp), kw.swing_leg_momentum(q, dq),
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        kw.swing_leg_momentum(q, dqp), kw.swing_leg_momentum(q, dq), rtol=1e-12
+    )
     # heel strike: before relabelling, with the old stance foot lifting off
-    from vhcjax.models._kneed_walker import _KNEE
     from vhcjax.hybrid._multidomain import augmented_impact_locked
+    from vhcjax.models._kneed_walker import _KNEE
 
     x = info.x_end[1]
     q, dq = x[:3], x[3:]
@@ -98,8 +101,9 @@ def test_impacts_at_the_gait_conserve_angular_momentum(kw, gait):
     np.testing.assert_allclose(
         kw.angular_momentum(q, dqp, foot, dzp), kw.angular_momentum(q, dq, foot), rtol=1e-12
     )
-    np.testing.assert_allclose(kw.stance_leg_momentum(q, dqp, dzp), kw.stance_leg_momentum(q, dq),
-                               rtol=1e-12)
+    np.testing.assert_allclose(
+        kw.stance_leg_momentum(q, dqp, dzp), kw.stance_leg_momentum(q, dq), rtol=1e-12
+    )
     np.testing.assert_allclose(impulse, info.impulse[1], rtol=1e-12)
     assert float(impulse @ kw.slope_normal) > 0  # pushes, does not pull
     # the relabelled post-impact state is the next cycle's start

@@ -7,17 +7,17 @@ hand-written kinematics of the three point masses.
 
 import math
 
+import _paths  # noqa: F401  (puts benchmarks/ on sys.path)
+import _sim
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+import scipy_reference as ref
 
 import vhcjax as vj
 from vhcjax.mechanics import _lagrangian as mech
-import _paths  # noqa: F401  (puts benchmarks/ on sys.path)
-import scipy_reference as ref
-import _sim
 
 RNG = np.random.default_rng(20261123)
 GAIT_X0 = np.array([0.2186688, -0.32338856, -1.09238359, -0.37737395])  # stable 3 deg gait
@@ -27,8 +27,12 @@ def random_params(n):
     """Random physical parameters (positive masses/lengths, slope in (0.5, 8) deg)."""
     return [
         dict(
-            m1=RNG.uniform(1, 10), m2=RNG.uniform(1, 10), mH=RNG.uniform(1, 20),
-            a=RNG.uniform(0.2, 1.0), b=RNG.uniform(0.2, 1.0), g=RNG.uniform(5, 15),
+            m1=RNG.uniform(1, 10),
+            m2=RNG.uniform(1, 10),
+            mH=RNG.uniform(1, 20),
+            a=RNG.uniform(0.2, 1.0),
+            b=RNG.uniform(0.2, 1.0),
+            g=RNG.uniform(5, 15),
             psi=math.radians(RNG.uniform(0.5, 8.0)),
         )
         for _ in range(n)
@@ -102,14 +106,23 @@ def test_M_C_G_equal_thesis_closed_forms(prm):
     par = ref.Params(**prm)
     for x in random_states(5):
         q, dq = x[:2], x[2:]
-        np.testing.assert_allclose(mass_matrix_j(model, jnp.asarray(q)), ref.M(par, q),
-                                   rtol=0, atol=1e-12 * np.abs(ref.M(par, q)).max())
+        np.testing.assert_allclose(
+            mass_matrix_j(model, jnp.asarray(q)),
+            ref.M(par, q),
+            rtol=0,
+            atol=1e-12 * np.abs(ref.M(par, q)).max(),
+        )
         scale = max(np.abs(ref.C(par, q, dq)).max(), 1.0)
-        np.testing.assert_allclose(coriolis_j(model, jnp.asarray(q), jnp.asarray(dq)),
-                                   ref.C(par, q, dq), rtol=0, atol=1e-12 * scale)
+        np.testing.assert_allclose(
+            coriolis_j(model, jnp.asarray(q), jnp.asarray(dq)),
+            ref.C(par, q, dq),
+            rtol=0,
+            atol=1e-12 * scale,
+        )
         scale = max(np.abs(ref.G(par, q)).max(), 1.0)
-        np.testing.assert_allclose(gravity_j(model, jnp.asarray(q)), ref.G(par, q),
-                                   rtol=0, atol=1e-12 * scale)
+        np.testing.assert_allclose(
+            gravity_j(model, jnp.asarray(q)), ref.G(par, q), rtol=0, atol=1e-12 * scale
+        )
         # Forward dynamics (via bias forces, without forming C) vs the closed-form ODE.
         acc = acceleration_j(model, jnp.asarray(q), jnp.asarray(dq))
         np.testing.assert_allclose(acc, ref.make_rhs(par)(0.0, x)[2:], rtol=1e-12, atol=1e-12)
@@ -228,8 +241,9 @@ def test_energy_conserved_during_a_swing(model):
 
     Integrated at rtol = atol = 1e-12: the drift measures the integrator tolerance (at the
     default 1e-10 it is ~1e-10), the test checks that the vector field conserves energy."""
-    from vhcjax.hybrid._simulate import flow
     import diffrax
+
+    from vhcjax.hybrid._simulate import flow
 
     par = ref.Params()
     x0 = jnp.asarray(GAIT_X0)

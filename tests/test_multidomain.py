@@ -6,9 +6,9 @@ import numpy as np
 import pytest
 
 import vhcjax
+from vhcjax.hybrid._multidomain import augmented_impact_locked, lock_impact, locked_acceleration
 from vhcjax.mechanics import _lagrangian as mech
 from vhcjax.models._kneed_walker import _KNEE, KneedWalker
-from vhcjax.hybrid._multidomain import augmented_impact_locked, lock_impact, locked_acceleration
 
 T = jnp.array([[1.0, 0.0], [0.0, 1.0], [0.0, 1.0]])  # locked knee: q = T (q1, q2)
 

@@ -33,5 +33,8 @@ def test_notebook_runs(path, tmp_path, monkeypatch):
     # Nothing written into the working directory (the repository, when run by hand).
     assert list(work.iterdir()) == []
     if path.name == "01_quickstart.py":  # thesis Figs 7.2-7.4, drawn (no silent skip)
-        assert {p.name for p in out.iterdir()} >= {"01_states.png", "01_phase.png",
-                                                   "01_periods.png"}
+        assert {p.name for p in out.iterdir()} >= {
+            "01_states.png",
+            "01_phase.png",
+            "01_periods.png",
+        }

@@ -28,10 +28,26 @@ def test_py_typed_shipped():
 
 
 def test_public_names():
-    for name in ("CompassGait", "WalkerModel", "simulate", "step", "Simulation", "StepResult",
-                 "SolverConfig", "DEFAULT_CONFIG", "FAST_CONFIG", "RESULTS", "result_names",
-                 "mass_matrix", "coriolis_matrix", "gravity_vector", "acceleration",
-                 "augmented_impact", "enable_compilation_cache", "clear_caches"):
+    for name in (
+        "CompassGait",
+        "WalkerModel",
+        "simulate",
+        "step",
+        "Simulation",
+        "StepResult",
+        "SolverConfig",
+        "DEFAULT_CONFIG",
+        "FAST_CONFIG",
+        "RESULTS",
+        "result_names",
+        "mass_matrix",
+        "coriolis_matrix",
+        "gravity_vector",
+        "acceleration",
+        "augmented_impact",
+        "enable_compilation_cache",
+        "clear_caches",
+    ):
         assert hasattr(vj, name), name
     for name in ("plot_states", "plot_phase_portrait", "plot_step_periods", "animate"):
         assert hasattr(vj.plotting, name), name

@@ -2,19 +2,22 @@
 
 import math
 
+import _sim
 import numpy as np
 
 import vhcjax as vj
 from vhcjax.plotting import _simulation as plotting
-import _sim
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
 
 def test_figures_written(tmp_path):
     sim = _sim.thesis_walk_dense()
-    for fn, name in ((plotting.plot_states, "states"), (plotting.plot_phase_portrait, "phase"),
-                     (plotting.plot_step_periods, "periods")):
+    for fn, name in (
+        (plotting.plot_states, "states"),
+        (plotting.plot_phase_portrait, "phase"),
+        (plotting.plot_step_periods, "periods"),
+    ):
         path = tmp_path / f"{name}.png"
         fn(sim, path=path)
         data = path.read_bytes()
@@ -44,8 +47,9 @@ def test_walker_frames_footprints_on_slope_and_step_length():
     np.testing.assert_allclose(feet[:, 1], -math.tan(psi) * feet[:, 0], atol=1e-9)
     xm = np.asarray(sim.steps.x_minus)
     lengths = 2 * l * np.sin((xm[:, 1] - xm[:, 0]) / 2)
-    np.testing.assert_allclose(np.linalg.norm(np.diff(feet, axis=0), axis=1), lengths[:-1],
-                               rtol=1e-9)
+    np.testing.assert_allclose(
+        np.linalg.norm(np.diff(feet, axis=0), axis=1), lengths[:-1], rtol=1e-9
+    )
     assert np.all(np.diff(feet[:, 0]) > 0)  # downhill, toward +x
     # Rigid legs: hip-to-foot distances are l in every frame.
     np.testing.assert_allclose(np.linalg.norm(fr["hip"] - fr["stance_foot"], axis=1), l)

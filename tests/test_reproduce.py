@@ -2,13 +2,12 @@
 
 import json
 import math
-import os
 
 import numpy as np
 import pytest
 
-from vhcjax.reproduce import _report as R
 from vhcjax.cli import main
+from vhcjax.reproduce import _report as R
 
 
 # ---- the verdict rule (no computation) ---------------------------------------------------
@@ -58,8 +57,9 @@ def quick_run(tmp_path_factory):
 
 
 def _row(res, section, quantity_prefix):
-    rows = [r for r in res["sections"][section]["rows"]
-            if r["quantity"].startswith(quantity_prefix)]
+    rows = [
+        r for r in res["sections"][section]["rows"] if r["quantity"].startswith(quantity_prefix)
+    ]
     assert rows, (section, quantity_prefix)
     return rows[0]
 
@@ -76,10 +76,17 @@ def test_report_sections_and_figures(quick_run):
             assert p.exists() and p.stat().st_size > 10_000, f
             assert f"![{f}]({f})" in report
     figs = [f for s in res["sections"].values() for f in s["figures"]]
-    for needed in ("fig7_1_multipliers_stable_3deg.png", "fig7_2_4_stable_3deg_states.png",
-                   "fig7_5_7_perturbed_3deg_phase.png", "fig7_8_multipliers_unstable_3deg.png",
-                   "fig7_15_multipliers_5deg.png", "sweep_families.png", "bifurcation.png",
-                   "basin_q1_dq1.png", "push.png"):
+    for needed in (
+        "fig7_1_multipliers_stable_3deg.png",
+        "fig7_2_4_stable_3deg_states.png",
+        "fig7_5_7_perturbed_3deg_phase.png",
+        "fig7_8_multipliers_unstable_3deg.png",
+        "fig7_15_multipliers_5deg.png",
+        "sweep_families.png",
+        "bifurcation.png",
+        "basin_q1_dq1.png",
+        "push.png",
+    ):
         assert needed in figs
     assert "total run time" in report and "jax" in report and "device" in report
 

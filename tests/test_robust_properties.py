@@ -13,14 +13,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from hypothesis import HealthCheck, example, given, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 import vhcjax as vj
 from vhcjax.stability import AGREEMENT_RTOL, gait_multipliers_jit, stability_json
 
-FLAGS = {"phase_not_monotone", "ill_conditioned", "methods_disagree", "no_impact",
-         "max_steps_reached", "nonfinite"}
+FLAGS = {
+    "phase_not_monotone",
+    "ill_conditioned",
+    "methods_disagree",
+    "no_impact",
+    "max_steps_reached",
+    "nonfinite",
+}
 SETTINGS = {"deadline": None, "derandomize": True, "suppress_health_check": list(HealthCheck)}
 
 
@@ -43,16 +48,23 @@ def _nearest(a, b):
 
 
 models = st.builds(
-    lambda m, mH, a, b, g, deg: vj.CompassGait(m1=m, m2=m, mH=mH, a=a, b=b, g=g,
-                                               psi=math.radians(deg)),
-    st.floats(0.5, 10.0), st.floats(0.1, 20.0), st.floats(0.3, 0.7), st.floats(0.3, 0.7),
-    st.floats(1.0, 25.0), st.floats(0.5, 29.0))
+    lambda m, mH, a, b, g, deg: vj.CompassGait(
+        m1=m, m2=m, mH=mH, a=a, b=b, g=g, psi=math.radians(deg)
+    ),
+    st.floats(0.5, 10.0),
+    st.floats(0.1, 20.0),
+    st.floats(0.3, 0.7),
+    st.floats(0.3, 0.7),
+    st.floats(1.0, 25.0),
+    st.floats(0.5, 29.0),
+)
 
 
 @settings(max_examples=4, **SETTINGS)
 @given(models)
-@example(vj.CompassGait(m1=4.0, m2=4.0, mH=12.0, a=0.45, b=0.55, g=9.0,
-                        psi=math.radians(4.0)))  # a gait exists: the checks run
+@example(
+    vj.CompassGait(m1=4.0, m2=4.0, mH=12.0, a=0.45, b=0.55, g=9.0, psi=math.radians(4.0))
+)  # a gait exists: the checks run
 def test_random_models_gaits_repeat_and_multipliers_hold_or_are_flagged(model):
     g = vj.find_gait(model, "stable", "vhc", throw=False)
     _no_nan(g, "gait")
@@ -63,8 +75,11 @@ def test_random_models_gaits_repeat_and_multipliers_hold_or_are_flagged(model):
     sim = vj.simulate(model, g.x_plus, 3)
     assert vj.result_names(sim.result) == "successful"
     scale = max(1.0, float(np.abs(g.x_plus).max()))
-    np.testing.assert_allclose(np.asarray(sim.steps.x_plus), np.broadcast_to(
-        np.asarray(g.x_plus), (3, 4)), atol=1e-6 * scale)
+    np.testing.assert_allclose(
+        np.asarray(sim.steps.x_plus),
+        np.broadcast_to(np.asarray(g.x_plus), (3, 4)),
+        atol=1e-6 * scale,
+    )
     np.testing.assert_allclose(np.asarray(sim.steps.period), float(g.T), rtol=1e-6)
     gm = gait_multipliers_jit(model, model.state_to_section(g.x_plus))
     _no_nan(gm, "multipliers")
@@ -89,12 +104,12 @@ def test_light_hip_heavy_legs_transverse_flagged_poincare_decides():
     used; the Poincare Jacobian (-1.065, 0.748, 0.221) decides: unstable."""
     model = vj.CompassGait(m1=10.0, m2=10.0, mH=0.1)
     z = jnp.array([0.08746059606983951, -0.29956712894520626, 2.0239753024603226])
-    assert vj.result_names(vj.simulate(model, model.section_to_state(z), 2).result) == \
-        "successful"
+    assert vj.result_names(vj.simulate(model, model.section_to_state(z), 2).result) == "successful"
     gm = gait_multipliers_jit(model, z)
     assert vj.result_names(gm.transverse_result) == "phase_not_monotone"
-    np.testing.assert_allclose(np.sort(np.asarray(gm.poincare).real),
-                               [-1.0652440, 0.2205511, 0.7482446], atol=1e-6)
+    np.testing.assert_allclose(
+        np.sort(np.asarray(gm.poincare).real), [-1.0652440, 0.2205511, 0.7482446], atol=1e-6
+    )
     assert not bool(gm.stable)
     # (central differences of the step map give the same three values to 1e-7; not
     # recomputed here: its compilation would double the test's time)
@@ -153,8 +168,9 @@ def test_model_repr_shows_values():
     assert "mH=12.5" in text and "psi=0.0523599" in text and "f64[]" not in text
 
 
-states = st.tuples(st.floats(-1.2, 1.2), st.floats(-1.2, 1.2), st.floats(-5.0, 5.0),
-                   st.floats(-5.0, 5.0))
+states = st.tuples(
+    st.floats(-1.2, 1.2), st.floats(-1.2, 1.2), st.floats(-5.0, 5.0), st.floats(-5.0, 5.0)
+)
 
 
 @settings(max_examples=12, **SETTINGS)

@@ -3,19 +3,19 @@ bisection brackets verified by simulation, Wilson interval against known values.
 
 import numpy as np
 import pytest
+from _robust import long_walk, returns_to, stable_gait
 
 import vhcjax as vj
 from vhcjax.robustness._basin import axis_directions, wilson_interval
 from vhcjax.robustness._recovery import CONVERGED, FELL
 
-from _robust import long_walk, returns_to, stable_gait
-
 
 @pytest.fixture(scope="module")
 def slice8():
     model, z, _, _ = stable_gait()
-    return vj.basin_slice(model, z, axes=(0, 1), half_widths=(0.08, 0.4), shape=(8, 8),
-                          num_steps=50, chunk=64)
+    return vj.basin_slice(
+        model, z, axes=(0, 1), half_widths=(0.08, 0.4), shape=(8, 8), num_steps=50, chunk=64
+    )
 
 
 def test_slice_classification_spot_checked(slice8):
@@ -29,8 +29,9 @@ def test_slice_classification_spot_checked(slice8):
     cell = (b.offsets_x[1] - b.offsets_x[0]) * (b.offsets_y[1] - b.offsets_y[0])
     assert np.isclose(b.area, np.sum(b.label == CONVERGED) * cell)
     rng = np.random.default_rng(0)
-    for (iy, ix), expect in [(p, True) for p in conv[rng.choice(len(conv), 2, replace=False)]] + \
-                            [(p, False) for p in fell[rng.choice(len(fell), 2, replace=False)]]:
+    for (iy, ix), expect in [(p, True) for p in conv[rng.choice(len(conv), 2, replace=False)]] + [
+        (p, False) for p in fell[rng.choice(len(fell), 2, replace=False)]
+    ]:
         zz = np.array(z, dtype=float)
         zz[0] += b.offsets_x[ix]
         zz[1] += b.offsets_y[iy]
@@ -55,8 +56,9 @@ def test_chunks_on_host_threads_give_the_same_classification(slice8, monkeypatch
     pts[:, 0] += gx.ravel()
     pts[:, 1] += gy.ravel()
     monkeypatch.setenv("VHCJAX_HOST_WORKERS", "2")
-    out = classify_section_points(model, slice8.z_star, np.concatenate([pts, pts[::-1]]),
-                                  num_steps=50, chunk=64)
+    out = classify_section_points(
+        model, slice8.z_star, np.concatenate([pts, pts[::-1]]), num_steps=50, chunk=64
+    )
     for key, ref in (("label", slice8.label), ("steps", slice8.steps), ("result", slice8.result)):
         np.testing.assert_array_equal(out[key][:64].reshape(8, 8), ref)
         np.testing.assert_array_equal(out[key][64:], out[key][:64][::-1])
@@ -90,15 +92,18 @@ def test_basin_volume_counts(slice8):
     assert np.isclose(v.volume, v.fraction * 0.1 * 0.4 * 1.0)
 
 
-@pytest.mark.parametrize("argv", [
-    ["basin", "--axes", "q1,foo"],
-    ["basin", "--axes", "q1,q1"],
-    ["basin", "--grid", "1", "5"],
-    ["basin", "--half-widths", "0", "0.1"],
-    ["push", "--phases", "0"],
-    ["contraction", "--scale", "-1"],
-    ["slope-sensitivity", "--heights-mm", "nan"],
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["basin", "--axes", "q1,foo"],
+        ["basin", "--axes", "q1,q1"],
+        ["basin", "--grid", "1", "5"],
+        ["basin", "--half-widths", "0", "0.1"],
+        ["push", "--phases", "0"],
+        ["contraction", "--scale", "-1"],
+        ["slope-sensitivity", "--heights-mm", "nan"],
+    ],
+)
 def test_cli_rejects_bad_input(argv, capsys):
     from vhcjax.cli import main
 

@@ -4,11 +4,10 @@ spectral radius of the autodiff Jacobian of the step map."""
 import math
 
 import numpy as np
+from _robust import stable_gait
 
 import vhcjax as vj
 from vhcjax.robustness._contraction import steps_to_shrink
-
-from _robust import stable_gait
 
 
 def test_steps_to_shrink_formula():
@@ -19,8 +18,7 @@ def test_steps_to_shrink_formula():
 
 def test_measured_decay_matches_multipliers():
     model, z, _, _ = stable_gait()
-    c = vj.contraction(model, z, num_perturbations=8, scale=1e-3, num_steps=30,
-                       fit_window=(5, 30))
+    c = vj.contraction(model, z, num_perturbations=8, scale=1e-3, num_steps=30, fit_window=(5, 30))
     rho = float(c.spectral_radius)
     assert 0.5 < rho < 0.7  # the stable 3-degree gait: |-0.1997 +- 0.5445i| = 0.580
     rates = np.asarray(c.measured_rates)

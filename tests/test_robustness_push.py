@@ -3,15 +3,13 @@ the simulation equals the transverse linearization with an input term and centra
 differences of pushed simulations; the largest survivable push is bracketed by simulation."""
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _robust import long_walk, returns_to, stable_gait
 
 import vhcjax as vj
 from vhcjax.robustness._push import direction, impulse_step, pulse_step
-
-from _robust import long_walk, returns_to, stable_gait
 
 impulse_step_jit = eqx.filter_jit(impulse_step)
 PHASES = jnp.array([0.0, 0.3, 0.6, 0.9])

@@ -6,13 +6,12 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _robust import fixed_point_jit, long_walk, returns_to, stable_gait, step_jit
 
 import vhcjax as vj
-from vhcjax.hybrid._simulate import DEFAULT_CONFIG
 from vhcjax.hybrid import _poincare as _poincare
+from vhcjax.hybrid._simulate import DEFAULT_CONFIG
 from vhcjax.robustness._terrain import floor_step_model
-
-from _robust import fixed_point_jit, long_walk, returns_to, stable_gait, step_jit
 
 multipliers_jit = _poincare.multipliers_jit
 
@@ -53,8 +52,7 @@ def test_gait_sensitivity_norm_vs_simulation():
     model, _, x_star, _ = stable_gait()
     g = vj.gait_sensitivity_norm(model, x_star, 40)
     h = 1e-6
-    rec = vj.terrain_recovery(model, x_star, jnp.array([h, -h]), 40, 0.0, DEFAULT_CONFIG,
-                              False)
+    rec = vj.terrain_recovery(model, x_star, jnp.array([h, -h]), 40, 0.0, DEFAULT_CONFIG, False)
     assert (np.asarray(rec.label) != 1).all()
     fd = (np.asarray(rec.step_times[0]) - np.asarray(rec.step_times[1])) / (2 * h)
     np.testing.assert_allclose(np.asarray(g.dtimes)[:12], fd[:12], rtol=1e-4, atol=1e-4)

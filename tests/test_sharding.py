@@ -121,8 +121,9 @@ def test_in_chunks_runs_chunks_concurrently_and_keeps_their_order():
     np.testing.assert_array_equal(np.asarray(out["x"]), np.arange(7.0))
     np.testing.assert_array_equal(np.asarray(out["y"][:, 0]), [0, 0, 2, 2, 4, 4, 6])
     assert len(threads) == 2
-    serial = in_chunks(lambda i, j: {"x": jnp.arange(i, j, dtype=float),
-                                     "y": jnp.full((j - i, 2), float(i))}, 7, 2)
+    serial = in_chunks(
+        lambda i, j: {"x": jnp.arange(i, j, dtype=float), "y": jnp.full((j - i, 2), float(i))}, 7, 2
+    )
     np.testing.assert_array_equal(np.asarray(serial["y"]), np.asarray(out["y"]))
 
 

@@ -11,6 +11,7 @@ import pytest
 import vhcjax
 from vhcjax import CompassGait
 from vhcjax.stability import _multipliers as S
+
 PSI3 = math.radians(3.0)
 
 
@@ -41,8 +42,9 @@ def test_multipliers_do_not_depend_on_the_section(gaits3, family):
 
 
 def _deviations(m, z, dz, num_steps):
-    sim = S._simulate_jit(m, m.section_to_state(jnp.asarray(z + dz)), num_steps,
-                          config=vhcjax.DEFAULT_CONFIG)
+    sim = S._simulate_jit(
+        m, m.section_to_state(jnp.asarray(z + dz)), num_steps, config=vhcjax.DEFAULT_CONFIG
+    )
     assert sim.result == vhcjax.RESULTS.successful
     zk = np.asarray(jnp.stack([m.state_to_section(x) for x in sim.steps.x_plus]))
     return np.concatenate([dz[None], zk - z[None]], axis=0)
@@ -85,8 +87,9 @@ def flip():
     """The period-doubling slope of the stable family."""
     m = CompassGait()
     lo, hi = math.radians(4.25), math.radians(4.5)
-    fp = S._fixed_point_jit(S.with_slope(m, lo), jnp.asarray((0.2275, -1.14, -0.20)), 1,
-                            config=vhcjax.DEFAULT_CONFIG)
+    fp = S._fixed_point_jit(
+        S.with_slope(m, lo), jnp.asarray((0.2275, -1.14, -0.20)), 1, config=vhcjax.DEFAULT_CONFIG
+    )
     assert fp.result == vhcjax.RESULTS.successful
     return S.period_doubling_slope(lo, hi, np.asarray(fp.z), model=m)
 
@@ -102,10 +105,12 @@ def test_period_doubling_slope_located_to_1e_4_degrees(flip):
     signs = []
     for dpsi in (-1e-4, 1e-4):
         p = flip.psi + math.radians(dpsi)
-        fp = S._fixed_point_jit(S.with_slope(m, p), jnp.asarray(flip.z), 1,
-                                config=vhcjax.DEFAULT_CONFIG)
-        Jfd = S.finite_difference_jacobian_jit(S.with_slope(m, p), fp.z, 1, 1e-5,
-                                               vhcjax.DEFAULT_CONFIG)
+        fp = S._fixed_point_jit(
+            S.with_slope(m, p), jnp.asarray(flip.z), 1, config=vhcjax.DEFAULT_CONFIG
+        )
+        Jfd = S.finite_difference_jacobian_jit(
+            S.with_slope(m, p), fp.z, 1, 1e-5, vhcjax.DEFAULT_CONFIG
+        )
         signs.append(np.sign(np.linalg.det(np.eye(3) + np.asarray(Jfd))))
     assert signs[0] * signs[1] < 0
 
@@ -118,8 +123,7 @@ def test_period_two_gait_is_a_fixed_point_of_two_simulator_steps(flip):
     assert br is not None and len(br["psi"]) == 1
     z = br["z"][0]
     mm = S.with_slope(m, psi)
-    sim = S._simulate_jit(mm, mm.section_to_state(jnp.asarray(z)), 2,
-                          config=vhcjax.DEFAULT_CONFIG)
+    sim = S._simulate_jit(mm, mm.section_to_state(jnp.asarray(z)), 2, config=vhcjax.DEFAULT_CONFIG)
     assert sim.result == vhcjax.RESULTS.successful
     z1 = np.asarray(mm.state_to_section(sim.steps.x_plus[0]))
     z2 = np.asarray(mm.state_to_section(sim.steps.x_plus[1]))
@@ -131,14 +135,17 @@ def test_period_two_gait_is_a_fixed_point_of_two_simulator_steps(flip):
     assert br["stable"][0]
 
 
-@pytest.mark.parametrize("argv", [
-    ["bifurcation", "--slope-deg", "5:1:0.1"],
-    ["bifurcation", "--slope-deg", "1:2"],
-    ["bifurcation", "--slope-deg", "0:2:0.5"],
-    ["bifurcation", "--slope-deg", "1:2:0.5", "--record", "0"],
-    ["bifurcation", "--slope-deg", "1:2:0.5", "--mass-hip", "-1"],
-    ["multipliers", "--slope-deg", "45"],
-])
+@pytest.mark.parametrize(
+    "argv",
+    [
+        ["bifurcation", "--slope-deg", "5:1:0.1"],
+        ["bifurcation", "--slope-deg", "1:2"],
+        ["bifurcation", "--slope-deg", "0:2:0.5"],
+        ["bifurcation", "--slope-deg", "1:2:0.5", "--record", "0"],
+        ["bifurcation", "--slope-deg", "1:2:0.5", "--mass-hip", "-1"],
+        ["multipliers", "--slope-deg", "45"],
+    ],
+)
 def test_cli_bad_input_is_one_line_error(argv, capsys):
     from vhcjax.cli import main
 
@@ -154,8 +161,25 @@ def test_cli_bifurcation_json_and_files(tmp_path, capsys):
     from vhcjax.cli import main
 
     csv, png = tmp_path / "b.csv", tmp_path / "b.png"
-    assert main(["bifurcation", "--slope-deg", "2.75:3.0:0.05", "--transient", "40",
-                 "--record", "8", "--json", "--csv", str(csv), "--png", str(png)]) == 0
+    assert (
+        main(
+            [
+                "bifurcation",
+                "--slope-deg",
+                "2.75:3.0:0.05",
+                "--transient",
+                "40",
+                "--record",
+                "8",
+                "--json",
+                "--csv",
+                str(csv),
+                "--png",
+                str(png),
+            ]
+        )
+        == 0
+    )
     out = json.loads(capsys.readouterr().out)
     assert out["period_doubling_slopes_deg"] == [] and out["num_fell"] == 0
     rows = csv.read_text().splitlines()
@@ -164,8 +188,12 @@ def test_cli_bifurcation_json_and_files(tmp_path, capsys):
     r3 = rows[6].split(",")
     assert r3[1] == "successful" and r3[2] == "1"
     # the simulated step period (FAST_CONFIG, after 40 steps) is the Newton gait's period
-    fp = S._fixed_point_jit(S.with_slope(CompassGait(), PSI3), jnp.asarray((0.2187, -1.092, -0.377)),
-                            1, config=vhcjax.DEFAULT_CONFIG)
+    fp = S._fixed_point_jit(
+        S.with_slope(CompassGait(), PSI3),
+        jnp.asarray((0.2187, -1.092, -0.377)),
+        1,
+        config=vhcjax.DEFAULT_CONFIG,
+    )
     assert abs(float(r3[3]) - float(fp.periods[0])) < 1e-6
     assert png.stat().st_size > 10_000
 
@@ -181,7 +209,8 @@ def test_period_four_gait_at_five_degrees():
     for a in o.multipliers:
         assert np.min(np.abs(o.multipliers_fd - a)) < 1e-6
     assert np.max(np.abs(o.multipliers)) < 1.0
-    sim = S._simulate_jit(m5, m5.section_to_state(jnp.asarray(o.z)), 4,
-                          config=vhcjax.DEFAULT_CONFIG)
+    sim = S._simulate_jit(
+        m5, m5.section_to_state(jnp.asarray(o.z)), 4, config=vhcjax.DEFAULT_CONFIG
+    )
     np.testing.assert_allclose(m5.state_to_section(sim.steps.x_plus[-1]), o.z, atol=1e-9)
     assert len(np.unique(np.round(np.asarray(sim.steps.period), 4))) == 4

@@ -19,16 +19,19 @@ def test_fine_sweep_finds_every_slope_and_equals_single_searches():
     for d in (0.5, 1.5072, 1.6364, 3.0004, 4.3):
         i = int(np.argmin(np.abs(deg - d)))
         # independently: Newton from the thesis seed (7.2), no continuation
-        one = vj.find_gait(vj.CompassGait(psi=math.radians(deg[i])), "stable",
-                           guess=(0.2, -1.0), throw=False)
+        one = vj.find_gait(
+            vj.CompassGait(psi=math.radians(deg[i])), "stable", guess=(0.2, -1.0), throw=False
+        )
         if vj.result_names(one.result) != "successful":  # far from 3 degrees: continuation
             one = vj.find_gait(vj.CompassGait(psi=math.radians(deg[i])), "stable")
-        np.testing.assert_allclose(np.asarray(sw.gaits.x_plus[i]), np.asarray(one.x_plus),
-                                   atol=1e-10)
+        np.testing.assert_allclose(
+            np.asarray(sw.gaits.x_plus[i]), np.asarray(one.x_plus), atol=1e-10
+        )
     # the tangent dz*/dpsi against a central difference of the sweep's own gaits
     i = 500
     dz = (np.asarray(sw.gaits.b[i + 1]) - np.asarray(sw.gaits.b[i - 1])) / (
-        np.radians(deg[i + 1]) - np.radians(deg[i - 1]))
+        np.radians(deg[i + 1]) - np.radians(deg[i - 1])
+    )
     np.testing.assert_allclose(float(sw.tangent[i, 1]), dz, rtol=1e-4)
 
 
@@ -47,8 +50,9 @@ def test_real_ends_are_reported_with_their_cause():
     sw = vj.sweep(vj.CompassGait(), np.radians(deg), "unstable")
     assert vj.result_names(sw.gaits.result) == ["successful"] * 2 + ["no_real_root"] * 2
     ends = sw.ends()
-    assert [(round(e["last_slope_deg"], 9), round(e["slope_deg"], 9), e["result"])
-            for e in ends] == [(14.0, 15.0, "no_real_root")]
+    assert [
+        (round(e["last_slope_deg"], 9), round(e["slope_deg"], 9), e["result"]) for e in ends
+    ] == [(14.0, 15.0, "no_real_root")]
     assert "no real root" in ends[0]["reason"]
     # A light hip (1 kg on 5 kg legs): the phi'' ODE of the stable family becomes
     # singular between 4 and 4.5 degrees.
@@ -56,15 +60,20 @@ def test_real_ends_are_reported_with_their_cause():
     assert vj.result_names(sw.gaits.result) == ["successful"] * 2 + ["singular_phi_ode"] * 2
     ends = sw.ends()
     assert [(round(e["last_slope_deg"], 9), e["result"]) for e in ends] == [
-        (4.0, "singular_phi_ode")]
+        (4.0, "singular_phi_ode")
+    ]
     # Where the VHC search cannot run at all (a lighter hip still), no end is invented,
     # and shooting finds the gaits the singular phi'' ODE hides.
     light = vj.CompassGait(mH=0.1, m1=10.0, m2=10.0)
     psi = np.radians([2.5, 3.0])
     assert set(vj.result_names(vj.sweep(light, psi, "stable").gaits.result)) <= {
-        "singular_phi_ode", "not_converged"}
-    assert vj.result_names(vj.sweep(light, psi, "stable", "shooting").gaits.result) == [
-        "successful"] * 2
+        "singular_phi_ode",
+        "not_converged",
+    }
+    assert (
+        vj.result_names(vj.sweep(light, psi, "stable", "shooting").gaits.result)
+        == ["successful"] * 2
+    )
 
 
 def test_a_missed_slope_is_retried_from_its_neighbour():
@@ -74,7 +83,8 @@ def test_a_missed_slope_is_retried_from_its_neighbour():
     model = vj.CompassGait()
     good = vj.find_gaits(model, jnp.array([[0.2, -1.0]] * 3), "stable", psi=jnp.asarray(psi))
     code = jax.vmap(lambda p, r: vj.RESULTS.where(p, vj.RESULTS.not_converged, r))(
-        jnp.arange(3) == 1, good.result)
+        jnp.arange(3) == 1, good.result
+    )
     missed = eqx.tree_at(lambda g: g.result, good, code)
     sign = vj.gait.family_sign("stable")
     fixed, tangent = _sweep._retry(model, psi, missed, "stable", "vhc", sign, math.radians(0.1))

@@ -11,9 +11,8 @@ import pytest
 
 import vhcjax
 from vhcjax import CompassGait
-from vhcjax.stability import _multipliers as S
-from vhcjax.stability import _transverse as TL
 from vhcjax.gait._vhc import phi_second_derivative, theta_dynamics_coefficients
+from vhcjax.stability import _multipliers as S, _transverse as TL
 
 SLOPES_DEG = [0.5, 3.0, 6.0]
 # Newton seeds only (rounded to 3-4 digits), one per (family, slope).
@@ -32,8 +31,9 @@ def gaits():
             psis.append(math.radians(deg))
             seeds.append(z)
             fams.append(fam)
-    fps = S._fixed_points_batch(CompassGait(), jnp.asarray(psis), jnp.asarray(seeds), 1,
-                                vhcjax.DEFAULT_CONFIG)
+    fps = S._fixed_points_batch(
+        CompassGait(), jnp.asarray(psis), jnp.asarray(seeds), 1, vhcjax.DEFAULT_CONFIG
+    )
     assert vhcjax.result_names(fps.result) == ["successful"] * len(psis)
     assert float(jnp.max(fps.residual)) < 1e-10
     return np.asarray(psis), np.asarray(fps.z), fams
@@ -78,8 +78,9 @@ def test_poincare_jacobian_equals_central_differences(gaits, mults):
     model = CompassGait()
     for i in (1, 4):  # 3 degrees, both families (one compile, two evaluations)
         m = S.with_slope(model, psis[i])
-        Jfd = S.finite_difference_jacobian_jit(m, jnp.asarray(zs[i]), 1, 1e-5,
-                                               vhcjax.DEFAULT_CONFIG)
+        Jfd = S.finite_difference_jacobian_jit(
+            m, jnp.asarray(zs[i]), 1, 1e-5, vhcjax.DEFAULT_CONFIG
+        )
         ev = np.linalg.eigvals(np.asarray(Jfd))
         for lam in np.asarray(mults.transverse[i]):
             assert np.min(np.abs(ev - lam)) < 1e-6
@@ -96,18 +97,23 @@ def test_orbit_rebuilt_from_vhc_matches_hybrid_simulation(mults):
     m = S.with_slope(CompassGait(), math.radians(SLOPES_DEG[1]))
     xm = np.asarray(tl.x_minus)
     h = 1e-6
-    fd = np.stack([(m.impact_momentum(xm + h * e) - m.impact_momentum(xm - h * e)) / (2 * h)
-                   for e in np.eye(4)], axis=1)
+    fd = np.stack(
+        [
+            (m.impact_momentum(xm + h * e) - m.impact_momentum(xm - h * e)) / (2 * h)
+            for e in np.eye(4)
+        ],
+        axis=1,
+    )
     np.testing.assert_allclose(tl.dF, fd, atol=1e-7)
 
 
 @eqx.filter_jit
 def _dense(m, x0, ts):
-    from vhcjax.hybrid._simulate import flow
     import diffrax
 
-    return flow(m, x0, ts[-1], vhcjax.DEFAULT_CONFIG, saveat=diffrax.SaveAt(ts=ts),
-                event=False).ys
+    from vhcjax.hybrid._simulate import flow
+
+    return flow(m, x0, ts[-1], vhcjax.DEFAULT_CONFIG, saveat=diffrax.SaveAt(ts=ts), event=False).ys
 
 
 def _orbit_point(psi, z, T, frac=0.4):
@@ -117,8 +123,15 @@ def _orbit_point(psi, z, T, frac=0.4):
     x = np.asarray(_dense(m, x0, jnp.asarray([0.0, frac * T]))[-1])
     theta, dtheta = x[0], x[2]
     phi, dphi = x[1:2], x[3:4] / dtheta
-    return m, m.energy(x0), jnp.asarray(theta), jnp.asarray(dtheta), jnp.asarray(phi), \
-        jnp.asarray(dphi), x
+    return (
+        m,
+        m.energy(x0),
+        jnp.asarray(theta),
+        jnp.asarray(dtheta),
+        jnp.asarray(phi),
+        jnp.asarray(dphi),
+        x,
+    )
 
 
 _system_matrix = eqx.filter_jit(TL.system_matrix)
@@ -174,15 +187,21 @@ def _transverse_rates(m, E0, th, dth, phi, dphi, zeta):
 def test_A_equals_finite_differences_of_full_dynamics(gaits, mults, index):
     psis, zs, _ = gaits
     for frac in (0.1, 0.5, 0.9):
-        m, E0, th, dth, phi, dphi, _ = _orbit_point(psis[index], zs[index],
-                                                    float(mults.period[index]), frac)
+        m, E0, th, dth, phi, dphi, _ = _orbit_point(
+            psis[index], zs[index], float(mults.period[index]), frac
+        )
         A, parts = _system_matrix(m, E0, th, dth, phi, dphi)
         h = 1e-6
         cols = []
         for e in np.eye(3):
             e = jnp.asarray(e)
-            cols.append((_transverse_rates(m, E0, th, dth, phi, dphi, h * e)
-                         - _transverse_rates(m, E0, th, dth, phi, dphi, -h * e)) / (2 * h))
+            cols.append(
+                (
+                    _transverse_rates(m, E0, th, dth, phi, dphi, h * e)
+                    - _transverse_rates(m, E0, th, dth, phi, dphi, -h * e)
+                )
+                / (2 * h)
+            )
         A_fd = np.stack(cols, axis=1)
         np.testing.assert_allclose(A, A_fd, atol=2e-6 * max(1.0, float(np.abs(A_fd).max())))
         # the directional derivative (6.18) equals d/d(dtheta) over 2 dtheta
@@ -200,8 +219,12 @@ def test_large_batches_run_in_chunks_with_the_same_results(gaits, mults, monkeyp
     monkeypatch.setenv("VHCJAX_HOST_WORKERS", "2")
     chunked = S.family_multipliers(CompassGait(), jnp.asarray(psis), jnp.asarray(zs))
     assert chunked.transverse.shape == mults.transverse.shape == (6, 3)
-    np.testing.assert_array_equal(np.asarray(chunked.result._value), np.asarray(mults.result._value))
-    np.testing.assert_allclose(np.asarray(chunked.transverse), np.asarray(mults.transverse),
-                               rtol=1e-12, atol=1e-14)
-    np.testing.assert_allclose(np.asarray(chunked.poincare), np.asarray(mults.poincare),
-                               rtol=1e-12, atol=1e-14)
+    np.testing.assert_array_equal(
+        np.asarray(chunked.result._value), np.asarray(mults.result._value)
+    )
+    np.testing.assert_allclose(
+        np.asarray(chunked.transverse), np.asarray(mults.transverse), rtol=1e-12, atol=1e-14
+    )
+    np.testing.assert_allclose(
+        np.asarray(chunked.poincare), np.asarray(mults.poincare), rtol=1e-12, atol=1e-14
+    )

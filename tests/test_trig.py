@@ -17,8 +17,9 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax.gait import _problem1
 from vhcjax import trig
+from vhcjax.gait import _problem1
+
 RNG = np.random.default_rng(7)
 
 
@@ -47,9 +48,7 @@ def test_each_angle_evaluated_once_per_field_evaluation(polynomial):
     compass-gait `phi''` field and of its forward-mode Jacobian: two angles, so 2 `sin`
     and 2 `cos` with libm (16 each before), and the polynomial's Cody-Waite rounding
     (`round-nearest-even`) twice, once per angle."""
-    import re
 
-    from vhcjax.gait import _problem1
     model = vj.CompassGait()
     y, E0, th = jnp.array([-0.25, 0.5, 0.0]), jnp.array(1.0), jnp.array(0.2)
 

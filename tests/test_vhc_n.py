@@ -9,12 +9,12 @@ import numpy as np
 import pytest
 
 import vhcjax
-from vhcjax.mechanics import _lagrangian as mech
-from vhcjax.hybrid import _poincare as P
-from vhcjax.models._pendulum_walker import PendulumWalker
 from vhcjax._results import RESULTS
-from vhcjax.stability._transverse import transverse_linearization
 from vhcjax.gait._vhc_n import vhc_gait_search, vhc_orbit
+from vhcjax.hybrid import _poincare as P
+from vhcjax.mechanics import _lagrangian as mech
+from vhcjax.models._pendulum_walker import PendulumWalker
+from vhcjax.stability._transverse import transverse_linearization
 
 fixed_point_jit = P.fixed_point_jit
 jacobian_jit = P.jacobian_jit
@@ -52,16 +52,17 @@ def test_pendulum_walker_impact_conserves_angular_momenta(pw):
 
         def L(pv, about, names, v0):
             p, v = pv
-            return sum(
-                masses[k] * _cross(p[k] - about, v[k] + v0) for k in names
-            )
+            return sum(masses[k] * _cross(p[k] - about, v[k] + v0) for k in names)
 
         foot, hip = pw.contact_point(q), pw.points(q)["hip"]
         z0 = jnp.zeros(2)
         return (
-            L(pts_v, foot, masses, z0), L(pts_vp, foot, masses, dzp),  # whole, about new foot
-            L(pts_v, hip, ["pendulum"], z0), L(pts_vp, hip, ["pendulum"], dzp),  # pendulum
-            L(pts_v, hip, ["stance_mass"], z0), L(pts_vp, hip, ["stance_mass"], dzp),
+            L(pts_v, foot, masses, z0),
+            L(pts_vp, foot, masses, dzp),  # whole, about new foot
+            L(pts_v, hip, ["pendulum"], z0),
+            L(pts_vp, hip, ["pendulum"], dzp),  # pendulum
+            L(pts_v, hip, ["stance_mass"], z0),
+            L(pts_vp, hip, ["stance_mass"], dzp),
         )
 
     a, b, c, d, e, f = go()

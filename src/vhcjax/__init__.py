@@ -10,38 +10,38 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from .models import CompassGait as CompassGait
+from . import trig as trig  # vectorizable sin/cos for model kinematics
 from ._cache import (
     clear_caches as clear_caches,
     default_cache_dir as default_cache_dir,
     enable_compilation_cache as enable_compilation_cache,
 )
-from .hybrid import jacobian as poincare_jacobian  # noqa: F401 (re-export)
-from .hybrid import multipliers as poincare_multipliers  # noqa: F401 (re-export)
+from ._results import RESULTS as RESULTS, result_codes as result_codes, result_names as result_names
 from .hybrid import (
-    fixed_point as fixed_point,
-    FixedPoint as FixedPoint,
-    MapResult as MapResult,
-    step_map as step_map,
     DEFAULT_CONFIG as DEFAULT_CONFIG,
     FAST_CONFIG as FAST_CONFIG,
+    FixedPoint as FixedPoint,
+    MapResult as MapResult,
     Simulation as Simulation,
     SolverConfig as SolverConfig,
     StepResult as StepResult,
+    fixed_point as fixed_point,
+    jacobian as poincare_jacobian,  # noqa: F401 (re-export)
+    multipliers as poincare_multipliers,  # noqa: F401 (re-export)
     simulate as simulate,
     simulate_batch as simulate_batch,
     step as step,
+    step_map as step_map,
 )
 from .mechanics import (
+    WalkerModel as WalkerModel,
     acceleration as acceleration,
     augmented_impact as augmented_impact,
     coriolis_matrix as coriolis_matrix,
     gravity_vector as gravity_vector,
     mass_matrix as mass_matrix,
 )
-from .mechanics import WalkerModel as WalkerModel
-from . import trig as trig  # vectorizable sin/cos for model kinematics
-from ._results import RESULTS as RESULTS, result_codes as result_codes, result_names as result_names
+from .models import CompassGait as CompassGait
 
 try:
     __version__ = importlib.metadata.version("vhcjax")
@@ -49,78 +49,9 @@ except importlib.metadata.PackageNotFoundError:  # running from a source tree
     __version__ = "0.0.0"
 
 # ---- multi-domain hybrid systems and the passive kneed walker ----
-from .models import KneedWalker as KneedWalker
-from .hybrid import (
-    DomainInfo as DomainInfo,
-    MultiDomainModel as MultiDomainModel,
-    multidomain_step as multidomain_step,
-    multidomain_trajectory as multidomain_trajectory,
-)
-from .models import PendulumWalker as PendulumWalker
-from .gait import (
-    VHCGait as VHCGait,
-    VHCOrbit as VHCOrbit,
-    vhc_gait_search as vhc_gait_search,
-    vhc_orbit as vhc_orbit,
-)
-
-# ---- robustness: contraction, basin of attraction, slope/terrain sensitivity, pushes ----
-from .robustness import (
-    BasinSlice as BasinSlice,
-    BasinVolume as BasinVolume,
-    basin_slice as basin_slice,
-    basin_volume as basin_volume,
-    max_converging_perturbation as max_converging_perturbation,
-)
-from .robustness import Threshold as Threshold, bisect_threshold as bisect_threshold
-from .robustness import Contraction as Contraction, contraction as contraction
-from .robustness import (
-    impulse_step as impulse_step,
-    max_push as max_push,
-    pulse_step as pulse_step,
-    push_sensitivity_autodiff as push_sensitivity_autodiff,
-    push_sensitivity_transverse as push_sensitivity_transverse,
-)
-from .robustness import CONVERGED as CONVERGED, Recovery as Recovery, recover as recover
-from .robustness import SlopeSensitivity as SlopeSensitivity, slope_sensitivity as slope_sensitivity
-from .robustness import (
-    FloorStepCompassGait as FloorStepCompassGait,
-    gait_sensitivity_norm as gait_sensitivity_norm,
-    max_floor_step as max_floor_step,
-    terrain_recovery as terrain_recovery,
-)
-
 # ---- figures and animation of a simulation; matplotlib is imported lazily ----
 from . import plotting as plotting
-
-# ---- stability: transverse linearization, multipliers, period doubling ----
-from .stability import (
-    BifurcationDiagram as BifurcationDiagram,
-    GaitMultipliers as GaitMultipliers,
-    bifurcation_diagram as bifurcation_diagram,
-    family_multipliers as family_multipliers,
-    gait_multipliers as gait_multipliers,
-    midswing_multipliers as midswing_multipliers,
-    period1_family as period1_family,
-    period2_branch as period2_branch,
-    period_doubling_slope as period_doubling_slope,
-    period_k_orbit as period_k_orbit,
-)
-from .stability import (
-    TransverseLinearization as TransverseLinearization,
-    transverse_linearization as transverse_linearization,
-)
-
-# ---- gait search: VHC search (Problem 1), shooting (Problem 2), batches, sweeps ----
-from .gait import (  # noqa: E402
-    Gait as Gait,
-    Sweep as Sweep,
-    find_gait as find_gait,
-    find_gaits as find_gaits,
-    shooting_search as shooting_search,
-    sweep as sweep,
-    vhc_search as vhc_search,
-)
+from ._cache import enable_default_cache as _enable_default_cache  # noqa: E402
 
 # ---- control: orbital stabilization by transverse-linearization feedback ----
 from .control import (  # noqa: E402
@@ -153,8 +84,27 @@ from .control import (  # noqa: E402
     with_torque_limit as with_torque_limit,
 )
 
-# ---- differentiable gaits: multipliers with derivatives, walker design, the parameter atlas ----
-from .stability import GaitSpectrum as GaitSpectrum, gait_spectrum as gait_spectrum  # noqa: E402
+# ---- gait search: VHC search (Problem 1), shooting (Problem 2), batches, sweeps ----
+from .gait import (  # noqa: E402
+    Gait as Gait,
+    Sweep as Sweep,
+    VHCGait as VHCGait,
+    VHCOrbit as VHCOrbit,
+    find_gait as find_gait,
+    find_gaits as find_gaits,
+    shooting_search as shooting_search,
+    sweep as sweep,
+    vhc_gait_search as vhc_gait_search,
+    vhc_orbit as vhc_orbit,
+    vhc_search as vhc_search,
+)
+from .hybrid import (
+    DomainInfo as DomainInfo,
+    MultiDomainModel as MultiDomainModel,
+    multidomain_step as multidomain_step,
+    multidomain_trajectory as multidomain_trajectory,
+)
+from .models import KneedWalker as KneedWalker, PendulumWalker as PendulumWalker
 from .parameters import (  # noqa: E402
     Atlas as Atlas,
     DesignResult as DesignResult,
@@ -165,6 +115,50 @@ from .parameters import (  # noqa: E402
     flip_slopes as flip_slopes,
 )
 
-from ._cache import enable_default_cache as _enable_default_cache  # noqa: E402
+# ---- robustness: contraction, basin of attraction, slope/terrain sensitivity, pushes ----
+from .robustness import (
+    CONVERGED as CONVERGED,
+    BasinSlice as BasinSlice,
+    BasinVolume as BasinVolume,
+    Contraction as Contraction,
+    FloorStepCompassGait as FloorStepCompassGait,
+    Recovery as Recovery,
+    SlopeSensitivity as SlopeSensitivity,
+    Threshold as Threshold,
+    basin_slice as basin_slice,
+    basin_volume as basin_volume,
+    bisect_threshold as bisect_threshold,
+    contraction as contraction,
+    gait_sensitivity_norm as gait_sensitivity_norm,
+    impulse_step as impulse_step,
+    max_converging_perturbation as max_converging_perturbation,
+    max_floor_step as max_floor_step,
+    max_push as max_push,
+    pulse_step as pulse_step,
+    push_sensitivity_autodiff as push_sensitivity_autodiff,
+    push_sensitivity_transverse as push_sensitivity_transverse,
+    recover as recover,
+    slope_sensitivity as slope_sensitivity,
+    terrain_recovery as terrain_recovery,
+)
+
+# ---- stability: transverse linearization, multipliers, period doubling ----
+# ---- differentiable gaits: multipliers with derivatives, walker design, the parameter atlas ----
+from .stability import (  # noqa: E402
+    BifurcationDiagram as BifurcationDiagram,
+    GaitMultipliers as GaitMultipliers,
+    GaitSpectrum as GaitSpectrum,
+    TransverseLinearization as TransverseLinearization,
+    bifurcation_diagram as bifurcation_diagram,
+    family_multipliers as family_multipliers,
+    gait_multipliers as gait_multipliers,
+    gait_spectrum as gait_spectrum,
+    midswing_multipliers as midswing_multipliers,
+    period1_family as period1_family,
+    period2_branch as period2_branch,
+    period_doubling_slope as period_doubling_slope,
+    period_k_orbit as period_k_orbit,
+    transverse_linearization as transverse_linearization,
+)
 
 _enable_default_cache()

@@ -21,7 +21,6 @@ import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
 
-
 def bucket_size(n, minimum=8):
     """Padded size of a batch of `n`: the smallest power of two that is at least `n` and
     `minimum`. Batches padded to these few sizes share compiled programs (tracing and

@@ -24,8 +24,7 @@ def to_jsonable(obj, nulls=None, path="") -> Any:  # the JSON value of `obj`
 
     nulls = [] if nulls is None else nulls
     if isinstance(obj, dict):
-        return {k: to_jsonable(v, nulls, f"{path}.{k}" if path else str(k))
-                for k, v in obj.items()}
+        return {k: to_jsonable(v, nulls, f"{path}.{k}" if path else str(k)) for k, v in obj.items()}
     if isinstance(obj, (list, tuple)):
         return [to_jsonable(v, nulls, f"{path}[{i}]") for i, v in enumerate(obj)]
     if hasattr(obj, "shape") or isinstance(obj, (np.generic,)):

@@ -30,7 +30,9 @@ class RESULTS(eqx.Enumeration):
     )
     bad_input = "Invalid input (non-positive mass or length, slope out of range, or NaN)."
     other_cycle = "Settled on a different cycle (not the target gait)."
-    undecided = "Neither converged to the gait, nor fell, nor settled on a cycle in the step budget."
+    undecided = (
+        "Neither converged to the gait, nor fell, nor settled on a cycle in the step budget."
+    )
     phase_not_monotone = (
         "The phase variable q1 is not monotone along the orbit: the transverse "
         "linearization (thesis ch. 6) does not apply; the Poincare-map Jacobian decides."

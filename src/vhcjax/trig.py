@@ -137,9 +137,7 @@ sin_cos_p.multiple_results = True
 _IMPLS = {True: jax.jit(_sin_cos_poly), False: jax.jit(_sin_cos_libm)}
 sin_cos_p.def_impl(lambda x, *, polynomial: _IMPLS[polynomial](x))  # eager == jitted
 sin_cos_p.def_abstract_eval(lambda x, **_: (ShapedArray(x.shape, x.dtype),) * 2)
-mlir.register_lowering(
-    sin_cos_p, lambda ctx, x, *, polynomial: _LOWERINGS[polynomial](ctx, x)
-)
+mlir.register_lowering(sin_cos_p, lambda ctx, x, *, polynomial: _LOWERINGS[polynomial](ctx, x))
 
 
 def _sin_cos_jvp(primals, tangents, *, polynomial):

@@ -4,9 +4,17 @@ multipliers in the complex plane."""
 import math
 
 from ._common import (
-    CLIError, add_model_flags, check_output_file, check_slope_deg, count, describe,
+    CLIError,
+    add_model_flags,
+    check_output_file,
+    check_slope_deg,
+    count,
+    describe,
     model_from_args,
-    parse_range, print_json, progress, warn,
+    parse_range,
+    print_json,
+    progress,
+    warn,
 )
 
 
@@ -21,18 +29,33 @@ def register(subparsers):
         "record the step periods of the last RECORD steps.",
     )
     add_model_flags(p, slope=False)
-    p.add_argument("--slope-deg", required=True, metavar="START:STOP:STEP",
-                   help="slopes in degrees, e.g. 0.5:5.5:0.01")
-    p.add_argument("--transient", type=count(0, 100_000), default=300,
-                   help="steps discarded as transient (default 300)")
-    p.add_argument("--record", type=count(1, 10_000), default=64,
-                   help="steps recorded (default 64)")
-    p.add_argument("--csv", metavar="FILE",
-                   help="write slope_deg, result, pattern, period_1..period_RECORD (pattern: "
-                   "steps per repetition, 0 aperiodic, -1 fell)")
+    p.add_argument(
+        "--slope-deg",
+        required=True,
+        metavar="START:STOP:STEP",
+        help="slopes in degrees, e.g. 0.5:5.5:0.01",
+    )
+    p.add_argument(
+        "--transient",
+        type=count(0, 100_000),
+        default=300,
+        help="steps discarded as transient (default 300)",
+    )
+    p.add_argument(
+        "--record", type=count(1, 10_000), default=64, help="steps recorded (default 64)"
+    )
+    p.add_argument(
+        "--csv",
+        metavar="FILE",
+        help="write slope_deg, result, pattern, period_1..period_RECORD (pattern: "
+        "steps per repetition, 0 aperiodic, -1 fell)",
+    )
     p.add_argument("--png", metavar="FILE", help="save the bifurcation diagram")
-    p.add_argument("--png-multipliers", metavar="FILE",
-                   help="save |multipliers| of the period-1 family against slope")
+    p.add_argument(
+        "--png-multipliers",
+        metavar="FILE",
+        help="save |multipliers| of the period-1 family against slope",
+    )
     p.add_argument("--json", action="store_true", help="print a JSON summary")
     p.set_defaults(func=run_bifurcation)
 
@@ -45,9 +68,13 @@ def register(subparsers):
     )
     add_model_flags(q)
     q.add_argument("--family", choices=["stable", "unstable"], default="stable")
-    q.add_argument("--method", choices=["vhc", "shooting"], default="vhc",
-                   help="gait search: vhc = thesis Problem 1, shooting = Problem 2 (default "
-                   "%(default)s; the VHC search needs q1 monotone along the step)")
+    q.add_argument(
+        "--method",
+        choices=["vhc", "shooting"],
+        default="vhc",
+        help="gait search: vhc = thesis Problem 1, shooting = Problem 2 (default "
+        "%(default)s; the VHC search needs q1 monotone along the step)",
+    )
     q.add_argument("--png", metavar="FILE", help="save the complex-plane plot")
     q.add_argument("--json", action="store_true", help="print a JSON object")
     q.set_defaults(func=run_multipliers)
@@ -71,9 +98,11 @@ def run_multipliers(args):
     # continued from the default model's gait to this model (any parameters)
     gait = find_gait(model, args.family, args.method, throw=False)
     if result_names(gait.result) != "successful":
-        raise CLIError(f"no {args.family} gait found at {args.slope_deg} deg by "
-                       f"{args.method} ({result_names(gait.result)}); try --method "
-                       f"{'shooting' if args.method == 'vhc' else 'vhc'}")
+        raise CLIError(
+            f"no {args.family} gait found at {args.slope_deg} deg by "
+            f"{args.method} ({result_names(gait.result)}); try --method "
+            f"{'shooting' if args.method == 'vhc' else 'vhc'}"
+        )
     z = model.state_to_section(gait.x_plus)
     gm = S.gait_multipliers_jit(model, z)
     tr, pc = np.asarray(gm.transverse), np.asarray(gm.poincare)
@@ -84,23 +113,30 @@ def run_multipliers(args):
     if args.png:
         from ..plotting import plot_multipliers_complex
 
-        sets, labels = ([tr, pc], ["transverse linearization", "Poincare (autodiff)"]) \
-            if trusted else ([pc], ["Poincare (autodiff)"])
-        plot_multipliers_complex(sets, labels, args.png,
-                                 title=f"{args.family} family, {describe(args)}")
-    out = {"slope_deg": args.slope_deg, "family": args.family, "z": np.asarray(z),
-           **stab}
+        sets, labels = (
+            ([tr, pc], ["transverse linearization", "Poincare (autodiff)"])
+            if trusted
+            else ([pc], ["Poincare (autodiff)"])
+        )
+        plot_multipliers_complex(
+            sets, labels, args.png, title=f"{args.family} family, {describe(args)}"
+        )
+    out = {"slope_deg": args.slope_deg, "family": args.family, "z": np.asarray(z), **stab}
     if args.json:
         print_json(out)
     else:
-        print(f"gait of the {args.family} family at {args.slope_deg} deg ({args.method}): "
-              f"z = {np.asarray(z)}")
+        print(
+            f"gait of the {args.family} family at {args.slope_deg} deg ({args.method}): "
+            f"z = {np.asarray(z)}"
+        )
         for a, b in zip(tr, pc):
             left = f"{a:.8f}" if trusted else "(not used)"
             print(f"  transverse {left}   poincare {b:.8f}")
         verdict = "stable" if stab["stable"] else "unstable"
-        print(f"  verdict: {verdict} (largest |multiplier| {stab['max_abs_multiplier']:.8g}, "
-              "Poincare-map Jacobian)")
+        print(
+            f"  verdict: {verdict} (largest |multiplier| {stab['max_abs_multiplier']:.8g}, "
+            "Poincare-map Jacobian)"
+        )
     return 0
 
 
@@ -121,8 +157,10 @@ def run_bifurcation(args):
     fam = S.period1_family(psis, "stable", model=model)
     ok1 = np.array(result_names(fam.result)) == "successful"
     if not ok1.any():
-        raise CLIError("no stable period-1 gait found at any slope (continued from the "
-                       "default model's 3-degree gait); check the model flags")
+        raise CLIError(
+            "no stable period-1 gait found at any slope (continued from the "
+            "default model's 3-degree gait); check the model flags"
+        )
     bar.update(1)
     mult = S.family_multipliers(model, fam.psi, fam.z)
     stable1 = np.asarray(mult.stable) & ok1
@@ -143,8 +181,9 @@ def run_bifurcation(args):
         if branch2 is not None and branch2["flip_psi"] is not None:
             flips.append(branch2["flip_psi"])
     bar.update(1)
-    diag = S.bifurcation_diagram(psis, np.asarray(fam.z), model=model,
-                                 num_transient=args.transient, num_record=args.record)
+    diag = S.bifurcation_diagram(
+        psis, np.asarray(fam.z), model=model, num_transient=args.transient, num_record=args.record
+    )
     bar.update(1)
     bar.close()
     names = result_names(diag.result)
@@ -152,33 +191,43 @@ def run_bifurcation(args):
         from .._io import atomic_open
 
         with atomic_open(args.csv, "w") as f:
-            f.write("slope_deg,result,pattern,"
-                    + ",".join(f"period_{i + 1}" for i in range(args.record)) + "\n")
+            f.write(
+                "slope_deg,result,pattern,"
+                + ",".join(f"period_{i + 1}" for i in range(args.record))
+                + "\n"
+            )
             for s, r, nd, per in zip(slopes, names, diag.period_pattern, diag.periods):
                 f.write(f"{s:.10g},{r},{nd}," + ",".join(f"{x:.12g}" for x in per) + "\n")
     if args.png:
         from ..plotting import plot_bifurcation
 
-        branches = [("period 1", np.degrees(psis)[ok1], np.asarray(fam.periods)[ok1],
-                     stable1[ok1])]
+        branches = [("period 1", np.degrees(psis)[ok1], np.asarray(fam.periods)[ok1], stable1[ok1])]
         if branch2 is not None and len(branch2["psi"]):
-            branches.append(("period 2", np.degrees(branch2["psi"]), branch2["periods"],
-                             branch2["stable"]))
-        plot_bifurcation(diag, branches, args.png, flips_deg=[math.degrees(f) for f in flips],
-                         case=describe(args, f"slopes {args.slope_deg} deg"))
+            branches.append(
+                ("period 2", np.degrees(branch2["psi"]), branch2["periods"], branch2["stable"])
+            )
+        plot_bifurcation(
+            diag,
+            branches,
+            args.png,
+            flips_deg=[math.degrees(f) for f in flips],
+            case=describe(args, f"slopes {args.slope_deg} deg"),
+        )
     if args.png_multipliers:
         from ..plotting import plot_multipliers_vs_slope
 
-        plot_multipliers_vs_slope(np.degrees(psis)[ok1],
-                                  {"stable family": np.asarray(mult.poincare)[ok1]},
-                                  args.png_multipliers,
-                                  case="Poincare-map Jacobian, "
-                                  + describe(args, f"slopes {args.slope_deg} deg"))
+        plot_multipliers_vs_slope(
+            np.degrees(psis)[ok1],
+            {"stable family": np.asarray(mult.poincare)[ok1]},
+            args.png_multipliers,
+            case="Poincare-map Jacobian, " + describe(args, f"slopes {args.slope_deg} deg"),
+        )
     fell = np.asarray(diag.fell)
     out = {
         "period_doubling_slopes_deg": [math.degrees(f) for f in flips],
         "period_doubling_slopes_deg_simulation": [
-            math.degrees(f) for f in S.period_doubling_slopes_from_diagram(diag)],
+            math.degrees(f) for f in S.period_doubling_slopes_from_diagram(diag)
+        ],
         "first_fall_slope_deg": float(np.degrees(psis[fell][0])) if fell.any() else None,
         "num_slopes": len(slopes),
         "num_fell": int(fell.sum()),

@@ -1,12 +1,14 @@
 """What the subcommands share: model flags, input checks, JSON output, progress bars."""
 
-import json
 import argparse
+import json
 import math
 import os
 import re
 import sys
 import tempfile
+
+from .._json import to_jsonable as to_jsonable
 
 
 class CLIError(Exception):
@@ -26,7 +28,8 @@ class Parser(argparse.ArgumentParser):
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
         self._negative_number_matcher = re.compile(
-            r"^-(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|inf|infinity|nan)$", re.IGNORECASE)
+            r"^-(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|inf|infinity|nan)$", re.IGNORECASE
+        )
 
     def error(self, message):
         # "argument --x0: must be ..." -> "--x0 must be ...", as the model-flag checks say
@@ -57,7 +60,8 @@ def number(kind=float, *, lo=None, hi=None, lo_open=False, hi_open=False):
             right = "inf" if hi is None else f"{hi:g}"
             raise argparse.ArgumentTypeError(
                 f"must be in {'(' if lo_open or lo is None else '['}{left}, {right}"
-                f"{')' if hi_open or hi is None else ']'}, got {text}")
+                f"{')' if hi_open or hi is None else ']'}, got {text}"
+            )
         return v
 
     parse.__name__ = kind.__name__
@@ -114,12 +118,20 @@ def add_model_flags(parser, *, slope=True, slope_default=3.0):
     """Model flags shared by every command (SI units; slope in degrees)."""
     g = parser.add_argument_group("model (compass gait, thesis Table 1 defaults)")
     if slope:
-        g.add_argument("--slope-deg", type=float, default=slope_default,
-                       help="slope angle in degrees, in (0, 30) (default %(default)s)")
+        g.add_argument(
+            "--slope-deg",
+            type=float,
+            default=slope_default,
+            help="slope angle in degrees, in (0, 30) (default %(default)s)",
+        )
     g.add_argument("--mass-hip", type=float, default=10.0, help="hip mass mH in kg (default 10)")
     g.add_argument("--mass-leg", type=float, default=5.0, help="mass of each leg in kg (default 5)")
-    g.add_argument("--a", type=float, default=0.5, help="hip to leg centre of mass in m (default 0.5)")
-    g.add_argument("--b", type=float, default=0.5, help="leg centre of mass to foot in m (default 0.5)")
+    g.add_argument(
+        "--a", type=float, default=0.5, help="hip to leg centre of mass in m (default 0.5)"
+    )
+    g.add_argument(
+        "--b", type=float, default=0.5, help="leg centre of mass to foot in m (default 0.5)"
+    )
     g.add_argument("--gravity", type=float, default=9.81, help="gravity in m/s^2 (default 9.81)")
     return g
 
@@ -138,9 +150,13 @@ KNEED_FLAGS = (
 def add_model_choice(parser):
     """`--model compass|kneed` and the kneed walker's own flags (`--mass-hip` and
     `--gravity` apply to both; their defaults are each model's)."""
-    parser.add_argument("--model", default="compass", choices=("compass", "kneed"),
-                        help="compass gait (thesis) or passive kneed walker (Hsu Chen 2007 "
-                        "parameters; --mass-hip defaults to 0.5 kg for it) (default %(default)s)")
+    parser.add_argument(
+        "--model",
+        default="compass",
+        choices=("compass", "kneed"),
+        help="compass gait (thesis) or passive kneed walker (Hsu Chen 2007 "
+        "parameters; --mass-hip defaults to 0.5 kg for it) (default %(default)s)",
+    )
     g = parser.add_argument_group("kneed walker (with --model kneed)")
     for dest, flag, _, text in KNEED_FLAGS:
         g.add_argument(flag, dest=dest, type=POSITIVE, default=None, help=text)
@@ -151,8 +167,10 @@ def kneed_from_args(args, slope_deg):
     from .. import KneedWalker
 
     values = {}
-    for dest, flag, field, _ in KNEED_FLAGS + (("mass_hip", "--mass-hip", "mh", ""),
-                                              ("gravity", "--gravity", "g", "")):
+    for dest, flag, field, _ in KNEED_FLAGS + (
+        ("mass_hip", "--mass-hip", "mh", ""),
+        ("gravity", "--gravity", "g", ""),
+    ):
         v = getattr(args, dest, None)
         if v is None or (dest in ("mass_hip", "gravity") and v == _COMPASS_DEFAULTS[dest]):
             continue
@@ -192,8 +210,13 @@ def model_from_args(args, slope_deg=None):
         slope_deg = args.slope_deg
     check_slope_deg(slope_deg)
     return CompassGait(
-        m1=args.mass_leg, m2=args.mass_leg, mH=args.mass_hip, a=args.a, b=args.b,
-        g=args.gravity, psi=math.radians(slope_deg),
+        m1=args.mass_leg,
+        m2=args.mass_leg,
+        mH=args.mass_hip,
+        a=args.a,
+        b=args.b,
+        g=args.gravity,
+        psi=math.radians(slope_deg),
     )
 
 
@@ -202,9 +225,13 @@ def describe(args, slope_deg=None):
     from thesis Table 1, e.g. `"slope 3 deg, mH 0.1 kg, m 10 kg"`."""
     slope = args.slope_deg if slope_deg is None else slope_deg
     parts = [slope if isinstance(slope, str) else f"slope {slope:g} deg"]
-    for flag, default, label in (("mass_hip", 10.0, "mH {} kg"), ("mass_leg", 5.0, "m {} kg"),
-                                 ("a", 0.5, "a {} m"), ("b", 0.5, "b {} m"),
-                                 ("gravity", 9.81, "g {} m/s^2")):
+    for flag, default, label in (
+        ("mass_hip", 10.0, "mH {} kg"),
+        ("mass_leg", 5.0, "m {} kg"),
+        ("a", 0.5, "a {} m"),
+        ("b", 0.5, "b {} m"),
+        ("gravity", 9.81, "g {} m/s^2"),
+    ):
         v = getattr(args, flag)
         if v != default:
             parts.append(label.format(f"{v:g}"))
@@ -230,19 +257,20 @@ def parse_range(text, name="--slope-deg"):
     return [start + i * step for i in range(n)]
 
 
-from .._json import to_jsonable as to_jsonable
-
-
 def print_json(obj):
     """Print `obj` as strict JSON: non-finite numbers become `null`, and a dict gains
     `"null_fields"`, the paths of those not explained by a `"<field>_reason"` key."""
     nulls = []
     out = to_jsonable(obj, nulls)
-    unexplained = [p for p in nulls if isinstance(out, dict)
-                   and f"{p.split('.')[0].split('[')[0]}_reason" not in out]
+    unexplained = [
+        p
+        for p in nulls
+        if isinstance(out, dict) and f"{p.split('.')[0].split('[')[0]}_reason" not in out
+    ]
     if unexplained and isinstance(out, dict):
-        out["null_fields"] = {p: "not a finite number (NaN or infinity): undefined here"
-                              for p in unexplained}
+        out["null_fields"] = {
+            p: "not a finite number (NaN or infinity): undefined here" for p in unexplained
+        }
     print(json.dumps(out, allow_nan=False))
 
 
@@ -263,5 +291,12 @@ def progress(iterable=None, total=None, desc=None, disable=None):
     if QUIET["on"]:
         disable = True
 
-    return tqdm(iterable, total=total, desc=desc, file=sys.stderr, leave=False,
-                disable=disable, dynamic_ncols=True)
+    return tqdm(
+        iterable,
+        total=total,
+        desc=desc,
+        file=sys.stderr,
+        leave=False,
+        disable=disable,
+        dynamic_ncols=True,
+    )

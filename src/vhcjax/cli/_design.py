@@ -8,8 +8,15 @@ from ._common import CLIError, add_model_flags, check_finite, model_from_args, p
 
 PARAMETERS = ("mass-hip", "mass-leg", "a", "b", "gravity")
 OBJECTIVES = ("spectral-radius", "flip-slope", "speed")
-ATLAS_CSV = ["mass_ratio", "length_ratio", "flip_slope_deg", "stable_lo_deg",
-             "stable_hi_deg", "spectral_radius", "reason"]
+ATLAS_CSV = [
+    "mass_ratio",
+    "length_ratio",
+    "flip_slope_deg",
+    "stable_lo_deg",
+    "stable_hi_deg",
+    "spectral_radius",
+    "reason",
+]
 
 
 def register(subparsers):
@@ -24,17 +31,31 @@ def register(subparsers):
     )
     add_model_flags(p)
     p.add_argument("--objective", required=True, choices=OBJECTIVES)
-    p.add_argument("--vary", required=True, metavar="NAMES",
-                   help="comma-separated parameters to vary, from " + ", ".join(PARAMETERS))
-    p.add_argument("--bounds", metavar="NAME=LO:HI,...",
-                   help="bounds of varied parameters (SI units), e.g. mass-hip=1:40,a=0.1:0.9; "
-                   "default mass 1:40 (hip) 1:20 (leg) kg, lengths 0.1:0.9 m, gravity 1:20")
+    p.add_argument(
+        "--vary",
+        required=True,
+        metavar="NAMES",
+        help="comma-separated parameters to vary, from " + ", ".join(PARAMETERS),
+    )
+    p.add_argument(
+        "--bounds",
+        metavar="NAME=LO:HI,...",
+        help="bounds of varied parameters (SI units), e.g. mass-hip=1:40,a=0.1:0.9; "
+        "default mass 1:40 (hip) 1:20 (leg) kg, lengths 0.1:0.9 m, gravity 1:20",
+    )
     p.add_argument("--steps", type=int, default=30, help="iterations at most (default 30)")
-    p.add_argument("--learning-rate", type=float, default=0.05,
-                   help="Adam rate in the parameters scaled to [0, 1] (default 0.05)")
-    p.add_argument("--json", action="store_true",
-                   help='print {"objective", "slope_deg", "vary", "result", "iterations", '
-                   '"initial", "optimum", "history"}')
+    p.add_argument(
+        "--learning-rate",
+        type=float,
+        default=0.05,
+        help="Adam rate in the parameters scaled to [0, 1] (default 0.05)",
+    )
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help='print {"objective", "slope_deg", "vary", "result", "iterations", '
+        '"initial", "optimum", "history"}',
+    )
     p.add_argument("--png", metavar="FILE", help="objective and parameters against iteration")
     p.set_defaults(func=run_design)
 
@@ -47,21 +68,48 @@ def register(subparsers):
         "leg mass (--mass-leg), leg length (--a + --b) and gravity only set the scales.",
     )
     add_model_flags(a, slope=False)
-    a.add_argument("--mass-ratio", required=True, metavar="START:STOP:STEP|LIST",
-                   help="mass ratios mH/m, e.g. 1:4:0.5 (inclusive) or 1,2,3")
-    a.add_argument("--length-ratio", required=True, metavar="START:STOP:STEP|LIST",
-                   help="length ratios b/a, e.g. 0.6:1.4:0.2 or 0.8,1,1.2")
-    a.add_argument("--slope-deg", type=float, default=None,
-                   help="report the spectral radius at this slope (degrees, in (0, 30))")
-    a.add_argument("--scan-start-deg", type=float, default=1.0,
-                   help="slope where the scan starts (degrees, default 1)")
-    a.add_argument("--scan-max-deg", type=float, default=12.0,
-                   help="highest slope scanned for the flip (degrees, default 12)")
-    a.add_argument("--scan-step-deg", type=float, default=0.5,
-                   help="slope step of the scan (degrees, default 0.5)")
-    a.add_argument("--json", action="store_true",
-                   help='print {"mass_ratio", "length_ratio", "cells": [{"mass_ratio", '
-                   '"length_ratio", "flip_slope_deg", "stable_range_deg", "spectral_radius"}]}')
+    a.add_argument(
+        "--mass-ratio",
+        required=True,
+        metavar="START:STOP:STEP|LIST",
+        help="mass ratios mH/m, e.g. 1:4:0.5 (inclusive) or 1,2,3",
+    )
+    a.add_argument(
+        "--length-ratio",
+        required=True,
+        metavar="START:STOP:STEP|LIST",
+        help="length ratios b/a, e.g. 0.6:1.4:0.2 or 0.8,1,1.2",
+    )
+    a.add_argument(
+        "--slope-deg",
+        type=float,
+        default=None,
+        help="report the spectral radius at this slope (degrees, in (0, 30))",
+    )
+    a.add_argument(
+        "--scan-start-deg",
+        type=float,
+        default=1.0,
+        help="slope where the scan starts (degrees, default 1)",
+    )
+    a.add_argument(
+        "--scan-max-deg",
+        type=float,
+        default=12.0,
+        help="highest slope scanned for the flip (degrees, default 12)",
+    )
+    a.add_argument(
+        "--scan-step-deg",
+        type=float,
+        default=0.5,
+        help="slope step of the scan (degrees, default 0.5)",
+    )
+    a.add_argument(
+        "--json",
+        action="store_true",
+        help='print {"mass_ratio", "length_ratio", "cells": [{"mass_ratio", '
+        '"length_ratio", "flip_slope_deg", "stable_range_deg", "spectral_radius"}]}',
+    )
     a.add_argument("--csv", metavar="FILE", help="one row per cell: " + ", ".join(ATLAS_CSV))
     a.add_argument("--png", metavar="FILE", help="heat map of the flip slope with contours")
     a.set_defaults(func=run_atlas)
@@ -118,7 +166,9 @@ def parse_values(text, name):
         else:
             values = [float(x) for x in text.split(",")]
     except ValueError:
-        raise CLIError(f"{name} must be START:STOP:STEP or a list like 1,2,3, got {text!r}") from None
+        raise CLIError(
+            f"{name} must be START:STOP:STEP or a list like 1,2,3, got {text!r}"
+        ) from None
     for v in values:
         _positive(name, v)
     if len(values) > 200:
@@ -152,8 +202,15 @@ def run_design(args):
             raise CLIError(f"--{name} = {start[name]} is outside its bounds {lo}:{hi}")
     bar = progress(total=args.steps + 1, desc=f"design {args.objective}")
     try:
-        res = design(args.objective, vary, model=model, bounds=bounds, steps=args.steps,
-                     learning_rate=args.learning_rate, callback=lambda h: bar.update(1))
+        res = design(
+            args.objective,
+            vary,
+            model=model,
+            bounds=bounds,
+            steps=args.steps,
+            learning_rate=args.learning_rate,
+            callback=lambda h: bar.update(1),
+        )
     except ValueError as e:
         raise CLIError(str(e)) from None
     finally:
@@ -173,20 +230,33 @@ def run_design(args):
         "vary": vary,
         "result": res.result,
         "iterations": res.iterations,
-        "initial": {"params": _params_json(res.initial["params"]),
-                    "value": value(res.initial["value"]),
-                    "gradient": grad(res.initial["gradient"])},
-        "optimum": {"params": _params_json(res.optimum["params"]),
-                    "value": value(res.optimum["value"]),
-                    "gradient": grad(res.optimum["gradient"]),
-                    "x0": res.optimum["x0"],
-                    "multipliers": [[float(np.real(m)), float(np.imag(m))]
-                                    for m in res.optimum["multipliers"]]},
-        "history": [{"iteration": h["iteration"], "params": _params_json(h["params"]),
-                     "value": value(h["value"])} for h in res.history],
+        "initial": {
+            "params": _params_json(res.initial["params"]),
+            "value": value(res.initial["value"]),
+            "gradient": grad(res.initial["gradient"]),
+        },
+        "optimum": {
+            "params": _params_json(res.optimum["params"]),
+            "value": value(res.optimum["value"]),
+            "gradient": grad(res.optimum["gradient"]),
+            "x0": res.optimum["x0"],
+            "multipliers": [
+                [float(np.real(m)), float(np.imag(m))] for m in res.optimum["multipliers"]
+            ],
+        },
+        "history": [
+            {
+                "iteration": h["iteration"],
+                "params": _params_json(h["params"]),
+                "value": value(h["value"]),
+            }
+            for h in res.history
+        ],
         "projected_gradient": res.projected_gradient,
-        "units": {"value": "deg" if flip else ("m/s" if args.objective == "speed" else "-"),
-                  "gradient": "value units per parameter unit (kg, m, m/s^2)"},
+        "units": {
+            "value": "deg" if flip else ("m/s" if args.objective == "speed" else "-"),
+            "gradient": "value units per parameter unit (kg, m, m/s^2)",
+        },
     }
     if args.png:
         from ..plotting import plot_design
@@ -196,10 +266,13 @@ def run_design(args):
         print_json(out)
     else:
         o = out["optimum"]
-        print(f"design {args.objective} at {args.slope_deg} deg: {res.result} after "
-              f"{res.iterations} iterations")
-        print(f"  value {out['initial']['value']:.6g} -> {o['value']:.6g} "
-              f"({out['units']['value']})")
+        print(
+            f"design {args.objective} at {args.slope_deg} deg: {res.result} after "
+            f"{res.iterations} iterations"
+        )
+        print(
+            f"  value {out['initial']['value']:.6g} -> {o['value']:.6g} ({out['units']['value']})"
+        )
         for k in vary:
             print(f"  {k:>9} {out['initial']['params'][k]:.6g} -> {o['params'][k]:.6g}")
     return 0 if res.result in ("successful", "max_iterations") else 1
@@ -227,12 +300,17 @@ def run_atlas(args):
         raise CLIError("--scan-max-deg must be above --scan-start-deg")
     if args.slope_deg is not None and args.slope_deg < args.scan_start_deg:
         raise CLIError("--slope-deg must not be below --scan-start-deg")
-    at = atlas(np.asarray(mu), np.asarray(beta),
-               slope=None if args.slope_deg is None else math.radians(args.slope_deg),
-               mass_leg=args.mass_leg, leg_length=args.a + args.b, gravity=args.gravity,
-               psi_start=math.radians(args.scan_start_deg),
-               psi_max=math.radians(args.scan_max_deg),
-               step=math.radians(args.scan_step_deg))
+    at = atlas(
+        np.asarray(mu),
+        np.asarray(beta),
+        slope=None if args.slope_deg is None else math.radians(args.slope_deg),
+        mass_leg=args.mass_leg,
+        leg_length=args.a + args.b,
+        gravity=args.gravity,
+        psi_start=math.radians(args.scan_start_deg),
+        psi_max=math.radians(args.scan_max_deg),
+        step=math.radians(args.scan_step_deg),
+    )
     rec = atlas_json(at)
     if args.csv:
         with open(args.csv, "w", newline="") as fh:
@@ -240,15 +318,23 @@ def run_atlas(args):
             w.writeheader()
             for c in rec["cells"]:
                 rng = c["stable_range_deg"] or [None, None]
-                w.writerow({"mass_ratio": c["mass_ratio"], "length_ratio": c["length_ratio"],
-                            "flip_slope_deg": c["flip_slope_deg"], "stable_lo_deg": rng[0],
-                            "stable_hi_deg": rng[1], "spectral_radius": c["spectral_radius"],
-                            "reason": c.get("reason", "")})
+                w.writerow(
+                    {
+                        "mass_ratio": c["mass_ratio"],
+                        "length_ratio": c["length_ratio"],
+                        "flip_slope_deg": c["flip_slope_deg"],
+                        "stable_lo_deg": rng[0],
+                        "stable_hi_deg": rng[1],
+                        "spectral_radius": c["spectral_radius"],
+                        "reason": c.get("reason", ""),
+                    }
+                )
     if args.png:
         from ..plotting import plot_atlas
 
-        plot_atlas(at, args.png, mass_leg=args.mass_leg, leg_length=args.a + args.b,
-                   gravity=args.gravity)
+        plot_atlas(
+            at, args.png, mass_leg=args.mass_leg, leg_length=args.a + args.b, gravity=args.gravity
+        )
     if args.json:
         print_json(rec)
     else:
@@ -256,6 +342,8 @@ def run_atlas(args):
         print(f"atlas: {len(mu)} x {len(beta)} cells, flip slope found in {found}")
         for c in rec["cells"]:
             f = c["flip_slope_deg"]
-            print(f"  mu {c['mass_ratio']:.4g} beta {c['length_ratio']:.4g}: "
-                  + (f"flip {f:.5f} deg" if f is not None else c.get("reason", "")))
+            print(
+                f"  mu {c['mass_ratio']:.4g} beta {c['length_ratio']:.4g}: "
+                + (f"flip {f:.5f} deg" if f is not None else c.get("reason", ""))
+            )
     return 0

@@ -6,17 +6,46 @@ import math
 from typing import Any
 
 from ._common import (
-    FINITE, CLIError, add_model_choice, add_model_flags, check_output_file, check_slope_deg,
-    describe, kneed_from_args, model_from_args, parse_range, print_json, progress, warn,
+    FINITE,
+    CLIError,
+    add_model_choice,
+    add_model_flags,
+    check_output_file,
+    check_slope_deg,
+    describe,
+    kneed_from_args,
+    model_from_args,
+    parse_range,
+    print_json,
+    progress,
+    warn,
 )
 
 #: CSV columns of `vhcjax sweep` (`sweep_row` writes them; append new ones at the end).
 CSV_COLUMNS = [
-    "slope_deg", "result", "a", "b", "c", "d", "e", "f", "g", "h", "T", "E0",
-    "step_length", "speed",
+    "slope_deg",
+    "result",
+    "a",
+    "b",
+    "c",
+    "d",
+    "e",
+    "f",
+    "g",
+    "h",
+    "T",
+    "E0",
+    "step_length",
+    "speed",
     # stability: transverse-linearization multipliers, by modulus
-    "mult1_re", "mult1_im", "mult2_re", "mult2_im", "mult3_re", "mult3_im",
-    "max_abs_multiplier", "stable",
+    "mult1_re",
+    "mult1_im",
+    "mult2_re",
+    "mult2_im",
+    "mult3_re",
+    "mult3_im",
+    "max_abs_multiplier",
+    "stable",
     # mult1..3 are empty where the transverse linearization is not trusted;
     # max_abs_multiplier and stable come from the Poincare-map Jacobian
     "transverse_result",
@@ -36,16 +65,27 @@ def register(subparsers):
     add_model_flags(p)
     add_model_choice(p)
     _family_method(p, both=False)
-    p.add_argument("--guess", type=FINITE, nargs="+", metavar="X",
-                   help="initial guess for q1 (rad) and dq1 (rad/s) just after impact, e.g. "
-                   "the thesis seed 0.20 -1.0 (shooting: optionally dq2 too; kneed walker: "
-                   "q1 dq1 dq2); default: continuation, no guess needed")
-    p.add_argument("--json", action="store_true",
-                   help='print {"result", "slope_deg", "family", "method", "x0", "params", '
-                   '"iterations", "residual"} and, for a gait found, its multipliers and '
-                   'stability verdict')
-    p.add_argument("--no-stability", action="store_true",
-                   help="skip the multipliers and the stability verdict (faster)")
+    p.add_argument(
+        "--guess",
+        type=FINITE,
+        nargs="+",
+        metavar="X",
+        help="initial guess for q1 (rad) and dq1 (rad/s) just after impact, e.g. "
+        "the thesis seed 0.20 -1.0 (shooting: optionally dq2 too; kneed walker: "
+        "q1 dq1 dq2); default: continuation, no guess needed",
+    )
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help='print {"result", "slope_deg", "family", "method", "x0", "params", '
+        '"iterations", "residual"} and, for a gait found, its multipliers and '
+        "stability verdict",
+    )
+    p.add_argument(
+        "--no-stability",
+        action="store_true",
+        help="skip the multipliers and the stability verdict (faster)",
+    )
     p.set_defaults(func=run_gait)
 
     s = subparsers.add_parser(
@@ -55,23 +95,35 @@ def register(subparsers):
         "predictor, Newton corrector) and report where it ends and why.",
     )
     add_model_flags(s, slope=False)
-    s.add_argument("--slope-deg", required=True, metavar="START:STOP:STEP",
-                   help="slopes in degrees, e.g. 0.5:6:0.1 (inclusive), each in (0, 30)")
+    s.add_argument(
+        "--slope-deg",
+        required=True,
+        metavar="START:STOP:STEP",
+        help="slopes in degrees, e.g. 0.5:6:0.1 (inclusive), each in (0, 30)",
+    )
     _family_method(s, both=True)
-    s.add_argument("--csv", metavar="FILE", help="write one row per slope: "
-                   + ", ".join(CSV_COLUMNS))
+    s.add_argument(
+        "--csv", metavar="FILE", help="write one row per slope: " + ", ".join(CSV_COLUMNS)
+    )
     s.add_argument("--png", metavar="FILE", help="plot a, b, T and speed against slope")
     s.add_argument("--json", action="store_true", help="print the sweep as JSON")
     s.set_defaults(func=run_sweep)
 
 
 def _family_method(p, both):
-    p.add_argument("--family", default="stable",
-                   choices=("stable", "unstable", "both") if both else ("stable", "unstable"),
-                   help="root of the energy quadratic (5.13): stable = thesis (7.3), "
-                   "unstable = (7.8) (default %(default)s)")
-    p.add_argument("--method", default="vhc", choices=("vhc", "shooting"),
-                   help="vhc = thesis Problem 1, shooting = Problem 2 (default %(default)s)")
+    p.add_argument(
+        "--family",
+        default="stable",
+        choices=("stable", "unstable", "both") if both else ("stable", "unstable"),
+        help="root of the energy quadratic (5.13): stable = thesis (7.3), "
+        "unstable = (7.8) (default %(default)s)",
+    )
+    p.add_argument(
+        "--method",
+        default="vhc",
+        choices=("vhc", "shooting"),
+        help="vhc = thesis Problem 1, shooting = Problem 2 (default %(default)s)",
+    )
 
 
 def gait_json(gait, slope_deg) -> dict[str, Any]:
@@ -105,8 +157,9 @@ def run_gait(args):
     if args.guess is not None:
         sizes = (3,) if args.model == "kneed" else (2, 3) if args.method == "shooting" else (2,)
         if len(args.guess) not in sizes:
-            raise CLIError(f"--guess takes {' or '.join(map(str, sizes))} numbers here, "
-                           f"got {len(args.guess)}")
+            raise CLIError(
+                f"--guess takes {' or '.join(map(str, sizes))} numbers here, got {len(args.guess)}"
+            )
     if args.model == "kneed":
         return _run_kneed_gait(args)
     model = model_from_args(args)
@@ -132,21 +185,27 @@ def run_gait(args):
     if args.json:
         print_json(rec)
         return 0 if found else 1
-    print(f"gait search at {args.slope_deg} deg (family {args.family}, method {args.method}): "
-          f"{rec['result']}")
+    print(
+        f"gait search at {args.slope_deg} deg (family {args.family}, method {args.method}): "
+        f"{rec['result']}"
+    )
     if not found:
         print(f"  no gait: {rec['reason']}")
         return 1
     assert rec["params"] is not None  # set to None only when not found
     for k, v in rec["params"].items():
         print(f"  {k:>3} = {v: .9f}")
-    print(f"  step length {float(gait.step_length):.6f} m, speed {float(gait.speed):.6f} m/s, "
-          f"{rec['iterations']} iterations, residual {rec['residual']:.2e}")
+    print(
+        f"  step length {float(gait.step_length):.6f} m, speed {float(gait.speed):.6f} m/s, "
+        f"{rec['iterations']} iterations, residual {rec['residual']:.2e}"
+    )
     if stab is not None:
         mods = ", ".join(f"{abs(complex(*e)):.6g}" for e in stab["multipliers_poincare"])
         verdict = "stable" if stab["stable"] else "unstable"
-        print(f"  verdict: {verdict} (largest |multiplier| {stab['max_abs_multiplier']:.6g}; "
-              f"Poincare-map moduli {mods})")
+        print(
+            f"  verdict: {verdict} (largest |multiplier| {stab['max_abs_multiplier']:.6g}; "
+            f"Poincare-map moduli {mods})"
+        )
     return 0
 
 
@@ -164,25 +223,34 @@ def _run_kneed_gait(args):
     guess = jnp.asarray(args.guess if args.guess is not None else KNEED_SEED)
     fp = fixed_point(model, guess)
     result = result_names(fp.result)
-    rec = {"result": result, "slope_deg": args.slope_deg, "model": "kneed",
-           "method": "shooting", "z": np.asarray(fp.z).tolist(),
-           "x0": np.asarray(fp.x0).tolist(),
-           "residual": float(fp.residual), "iterations": int(fp.iterations)}
+    rec = {
+        "result": result,
+        "slope_deg": args.slope_deg,
+        "model": "kneed",
+        "method": "shooting",
+        "z": np.asarray(fp.z).tolist(),
+        "x0": np.asarray(fp.x0).tolist(),
+        "residual": float(fp.residual),
+        "iterations": int(fp.iterations),
+    }
     if result == "successful":
         ev = np.asarray(poincare_multipliers(model, fp.z))
         ev = ev[np.argsort(-np.abs(ev))]
         radius = float(np.max(np.abs(ev)))
-        rec.update(period=float(fp.periods[0]), multipliers=ev,
-                   spectral_radius=radius, stable=radius < 1.0)
+        rec.update(
+            period=float(fp.periods[0]), multipliers=ev, spectral_radius=radius, stable=radius < 1.0
+        )
     if args.json:
         print_json(rec)
     else:
         print(f"kneed walker gait at {args.slope_deg} deg (shooting): {result}")
         if result == "successful":
             print("  z = (q1, dq1, dq2) = " + ", ".join(f"{v:.8f}" for v in rec["z"]))
-            print(f"  period {rec['period']:.8f} s, multipliers "
-                  + ", ".join(f"{complex(v):.5f}" for v in rec["multipliers"])
-                  + f" ({'stable' if rec['stable'] else 'unstable'})")
+            print(
+                f"  period {rec['period']:.8f} s, multipliers "
+                + ", ".join(f"{complex(v):.5f}" for v in rec["multipliers"])
+                + f" ({'stable' if rec['stable'] else 'unstable'})"
+            )
     return 0 if result == "successful" else 1
 
 
@@ -214,8 +282,10 @@ def run_sweep(args):
         results[fam] = sweep(model, [math.radians(v) for v in slopes], fam, args.method)
         bar.update(1)
     bar.close()
-    rows = {fam: [sweep_row(sw.gaits, i, v) for i, v in enumerate(slopes)]
-            for fam, sw in results.items()}
+    rows = {
+        fam: [sweep_row(sw.gaits, i, v) for i, v in enumerate(slopes)]
+        for fam, sw in results.items()
+    }
     if args.csv:  # multipliers of every gait in one batched call
         from ..stability import add_stability_columns
 
@@ -225,8 +295,11 @@ def run_sweep(args):
         from .._io import atomic_open
 
         with atomic_open(args.csv, "w", newline="") as fh:
-            w = csv.DictWriter(fh, fieldnames=(["family"] if len(families) > 1 else [])
-                               + CSV_COLUMNS, extrasaction="ignore")
+            w = csv.DictWriter(
+                fh,
+                fieldnames=(["family"] if len(families) > 1 else []) + CSV_COLUMNS,
+                extrasaction="ignore",
+            )
             w.writeheader()
             for fam in families:
                 for r in rows[fam]:
@@ -234,20 +307,27 @@ def run_sweep(args):
     if args.png:
         from ..plotting import plot_sweep
 
-        plot_sweep(results, args.png,
-                   case=describe(args, f"{args.method}, slopes {args.slope_deg} deg"))
+        plot_sweep(
+            results, args.png, case=describe(args, f"{args.method}, slopes {args.slope_deg} deg")
+        )
     summary = {}
     for fam, sw in results.items():
         n_ok = sum(r["result"] == "successful" for r in rows[fam])
         summary[fam] = {"found": n_ok, "total": len(slopes), "ends": sw.ends()}
     if args.json:
-        print_json({"method": args.method, "families": {
-            fam: {**summary[fam], "rows": rows[fam]} for fam in families}})
+        print_json(
+            {
+                "method": args.method,
+                "families": {fam: {**summary[fam], "rows": rows[fam]} for fam in families},
+            }
+        )
     else:
         for fam in families:
             s = summary[fam]
             print(f"{fam}: found at {s['found']} of {s['total']} slopes")
             for e in s["ends"]:
-                print(f"  ends near {e['last_slope_deg']:.4g} deg (next: {e['slope_deg']:.4g} "
-                      f"deg): {e['reason']}")
+                print(
+                    f"  ends near {e['last_slope_deg']:.4g} deg (next: {e['slope_deg']:.4g} "
+                    f"deg): {e['reason']}"
+                )
     return 0

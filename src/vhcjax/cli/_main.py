@@ -37,8 +37,9 @@ def build_parser():
         importlib.import_module(f"vhcjax.cli.{name}").register(sub)
     for command in sub.choices.values():
         if not any("--quiet" in a.option_strings for a in command._actions):
-            command.add_argument("--quiet", action="store_true",
-                                 help="no progress bars or notes on stderr")
+            command.add_argument(
+                "--quiet", action="store_true", help="no progress bars or notes on stderr"
+            )
     return parser
 
 
@@ -48,8 +49,10 @@ def _first_run_note():
 
     directory = jax.config.values["jax_compilation_cache_dir"]
     if directory and (not os.path.isdir(directory) or not os.listdir(directory)):
-        print(f"vhcjax: compiling (first run only; later runs load the programs from "
-              f"{directory})", file=sys.stderr)
+        print(
+            f"vhcjax: compiling (first run only; later runs load the programs from {directory})",
+            file=sys.stderr,
+        )
 
 
 def _stop_on_interrupt():
@@ -115,8 +118,11 @@ def main(argv=None):
         if os.environ.get("VHCJAX_DEBUG"):
             raise
         msg = " ".join(str(e).split())[:300]
-        print(f"vhcjax {args.command}: internal error: {type(e).__name__}: {msg} "
-              "(VHCJAX_DEBUG=1 shows the traceback)", file=sys.stderr)
+        print(
+            f"vhcjax {args.command}: internal error: {type(e).__name__}: {msg} "
+            "(VHCJAX_DEBUG=1 shows the traceback)",
+            file=sys.stderr,
+        )
         return 1
 
 

@@ -15,8 +15,11 @@ def register(subparsers):
         "DIR/results.json.",
     )
     p.add_argument("--out", required=True, metavar="DIR", help="output directory")
-    p.add_argument("--quick", action="store_true",
-                   help="small sizes (short sweeps, coarse basin, few slopes): for tests")
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help="small sizes (short sweeps, coarse basin, few slopes): for tests",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run_reproduce)
     return p
@@ -32,6 +35,8 @@ def run_reproduce(args):
     res = reproduce(args.out, quick=args.quick, progress=bar)
     bar.close()
     counts = ", ".join(f"{k}: {v}" for k, v in sorted(res["verdict_counts"].items()))
-    print(f"wrote {os.path.join(args.out, 'report.md')} and results.json "
-          f"({res['total_seconds']:.0f} s; verdicts {counts})")
+    print(
+        f"wrote {os.path.join(args.out, 'report.md')} and results.json "
+        f"({res['total_seconds']:.0f} s; verdicts {counts})"
+    )
     return 0

@@ -3,8 +3,17 @@
 import math
 
 from ._common import (
-    FINITE, POSITIVE, CLIError, add_model_flags, check_output_file, count, describe,
-    model_from_args, number, print_json, progress,
+    FINITE,
+    POSITIVE,
+    CLIError,
+    add_model_flags,
+    check_output_file,
+    count,
+    describe,
+    model_from_args,
+    number,
+    print_json,
+    progress,
 )
 
 STABLE_SEED = (0.2186688, -1.09238359, -0.37737395)  # stable 3-degree gait (Newton seed)
@@ -18,10 +27,15 @@ AXIS_NAMES = ("q1", "dq1", "dq2")
 
 def _common(p, png_help):
     add_model_flags(p)
-    p.add_argument("--gait", type=FINITE, nargs=3, metavar=("Q1", "DQ1", "DQ2"),
-                   default=list(STABLE_SEED),
-                   help="Newton seed for the gait: post-impact q1 (rad), dq1, dq2 (rad/s); "
-                   "default: the stable 3-degree gait")
+    p.add_argument(
+        "--gait",
+        type=FINITE,
+        nargs=3,
+        metavar=("Q1", "DQ1", "DQ2"),
+        default=list(STABLE_SEED),
+        help="Newton seed for the gait: post-impact q1 (rad), dq1, dq2 (rad/s); "
+        "default: the stable 3-degree gait",
+    )
     p.add_argument("--json", action="store_true", help="print the results as one JSON object")
     p.add_argument("--png", metavar="FILE", help=png_help)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -33,14 +47,16 @@ def _gait(args):
     import jax.numpy as jnp
     import numpy as np
 
-    from ..hybrid import fixed_point
     from .._results import result_names
+    from ..hybrid import fixed_point
 
     model = model_from_args(args)
     fp = eqx.filter_jit(fixed_point)(model, jnp.asarray(args.gait, float))
     if result_names(fp.result) != "successful":
-        raise CLIError(f"no gait found from --gait {args.gait} at slope {args.slope_deg} deg "
-                       f"({result_names(fp.result)}); give a better seed")
+        raise CLIError(
+            f"no gait found from --gait {args.gait} at slope {args.slope_deg} deg "
+            f"({result_names(fp.result)}); give a better seed"
+        )
     return model, fp.z, fp.x0, float(fp.periods[0]), np.asarray(fp.z)
 
 
@@ -50,77 +66,138 @@ def _bar(args):
 
 def register(subparsers):
     p = subparsers.add_parser(
-        "contraction", help="speed of contraction to the gait (multipliers vs simulation)",
+        "contraction",
+        help="speed of contraction to the gait (multipliers vs simulation)",
         description="Spectral radius of the step map at the gait, steps to shrink an error "
-        "10x and 100x, and the decay rate measured from simulated recoveries.")
+        "10x and 100x, and the decay rate measured from simulated recoveries.",
+    )
     _common(p, "save the recovery curves with the rho^k prediction")
-    p.add_argument("--perturbations", type=count(1, 100_000), default=32,
-                   help="simulated recoveries (1 to 100000)")
-    p.add_argument("--scale", type=number(float, lo=0.0, hi=0.5, lo_open=True), default=1e-3,
-                   help="size of the perturbations, in (0, 0.5]")
-    p.add_argument("--steps", type=count(8, 100_000), default=30,
-                   help="steps per recovery (8 to 100000)")
+    p.add_argument(
+        "--perturbations",
+        type=count(1, 100_000),
+        default=32,
+        help="simulated recoveries (1 to 100000)",
+    )
+    p.add_argument(
+        "--scale",
+        type=number(float, lo=0.0, hi=0.5, lo_open=True),
+        default=1e-3,
+        help="size of the perturbations, in (0, 0.5]",
+    )
+    p.add_argument(
+        "--steps", type=count(8, 100_000), default=30, help="steps per recovery (8 to 100000)"
+    )
     p.set_defaults(func=run_contraction)
 
     p = subparsers.add_parser(
-        "basin", help="region of attraction: 2-D slice and Monte-Carlo volume",
+        "basin",
+        help="region of attraction: 2-D slice and Monte-Carlo volume",
         description="Classify a grid of post-impact perturbations of the gait along two "
         "section coordinates (q1, dq1, dq2; the third nominal) as converging (with steps "
         "to converge), falling, settling elsewhere or undecided; optional Monte-Carlo "
-        "estimate of the basin's volume fraction in a 3-D box.")
+        "estimate of the basin's volume fraction in a 3-D box.",
+    )
     _common(p, "save the basin slice coloured by steps to converge")
     p.add_argument("--axes", default="q1,dq1", help="two of q1,dq1,dq2 (default q1,dq1)")
-    p.add_argument("--half-widths", type=POSITIVE, nargs=2, default=[0.08, 0.4],
-                   help="grid half widths along the two axes (default 0.08 0.4)")
-    p.add_argument("--grid", type=count(2, MAX_GRID_POINTS // 2), nargs=2, default=[200, 200],
-                   help=f"grid points along each axis (at least 2; at most {MAX_GRID_POINTS} "
-                   "in all)")
-    p.add_argument("--steps", type=count(1, 100_000), default=50,
-                   help="steps simulated per point")
-    p.add_argument("--tol", type=number(float, lo=0.0, hi=1.0, lo_open=True), default=1e-4,
-                   help="convergence tolerance, in (0, 1]")
-    p.add_argument("--chunk", type=count(1, 1_000_000), default=1024,
-                   help="batch size of one call")
-    p.add_argument("--volume-samples", type=count(0, MAX_SAMPLES), default=0,
-                   help="Monte-Carlo samples for the 3-D volume fraction (0: skip)")
-    p.add_argument("--box", type=POSITIVE, nargs=3, default=[0.05, 0.2, 0.5],
-                   help="half widths of the 3-D box (q1, dq1, dq2)")
+    p.add_argument(
+        "--half-widths",
+        type=POSITIVE,
+        nargs=2,
+        default=[0.08, 0.4],
+        help="grid half widths along the two axes (default 0.08 0.4)",
+    )
+    p.add_argument(
+        "--grid",
+        type=count(2, MAX_GRID_POINTS // 2),
+        nargs=2,
+        default=[200, 200],
+        help=f"grid points along each axis (at least 2; at most {MAX_GRID_POINTS} in all)",
+    )
+    p.add_argument("--steps", type=count(1, 100_000), default=50, help="steps simulated per point")
+    p.add_argument(
+        "--tol",
+        type=number(float, lo=0.0, hi=1.0, lo_open=True),
+        default=1e-4,
+        help="convergence tolerance, in (0, 1]",
+    )
+    p.add_argument("--chunk", type=count(1, 1_000_000), default=1024, help="batch size of one call")
+    p.add_argument(
+        "--volume-samples",
+        type=count(0, MAX_SAMPLES),
+        default=0,
+        help="Monte-Carlo samples for the 3-D volume fraction (0: skip)",
+    )
+    p.add_argument(
+        "--box",
+        type=POSITIVE,
+        nargs=3,
+        default=[0.05, 0.2, 0.5],
+        help="half widths of the 3-D box (q1, dq1, dq2)",
+    )
     p.set_defaults(func=run_basin)
 
     p = subparsers.add_parser(
-        "slope-sensitivity", help="derivatives w.r.t. the slope; floor-step disturbances",
+        "slope-sensitivity",
+        help="derivatives w.r.t. the slope; floor-step disturbances",
         description="Derivatives of the gait, period, speed and multipliers with respect to "
         "the slope (implicit differentiation), the largest single step up/down survived, "
-        "recovery curves and the gait sensitivity norm for floor-height disturbances.")
+        "recovery curves and the gait sensitivity norm for floor-height disturbances.",
+    )
     _common(p, "save the recovery after floor steps (and <FILE>-slope.png: derivatives)")
-    p.add_argument("--heights-mm", type=number(float, lo=-500.0, hi=500.0), nargs="+", default=[-15, -12, -5, 2, 5],
-                   help="floor steps (mm, + up) for the recovery curves")
-    p.add_argument("--steps", type=count(1, 100_000), default=40,
-                   help="steps after the floor step")
-    p.add_argument("--no-derivatives", action="store_true",
-                   help="skip the slope derivatives (long first compilation)")
+    p.add_argument(
+        "--heights-mm",
+        type=number(float, lo=-500.0, hi=500.0),
+        nargs="+",
+        default=[-15, -12, -5, 2, 5],
+        help="floor steps (mm, + up) for the recovery curves",
+    )
+    p.add_argument("--steps", type=count(1, 100_000), default=40, help="steps after the floor step")
+    p.add_argument(
+        "--no-derivatives",
+        action="store_true",
+        help="skip the slope derivatives (long first compilation)",
+    )
     p.set_defaults(func=run_slope)
 
     p = subparsers.add_parser(
-        "push", help="sensitivity to hip pushes along the gait; largest push survived",
+        "push",
+        help="sensitivity to hip pushes along the gait; largest push survived",
         description="Linear sensitivity of the next post-impact state to a hip impulse as a "
         "function of the phase of the step (autodiff; with --check also the transverse "
-        "linearization), and the largest push survived per phase and direction.")
+        "linearization), and the largest push survived per phase and direction.",
+    )
     _common(p, "save sensitivity and largest push vs phase")
-    p.add_argument("--phases", type=count(1, 10_000), default=20,
-                   help="phases in [0, 1) (default 20)")
-    p.add_argument("--directions-deg", type=FINITE, nargs="+", default=[0, 90, 180, 270],
-                   help="push directions, degrees from forward, counter-clockwise")
-    p.add_argument("--duration", type=number(float, lo=0.0, hi=10.0), default=0.0,
-                   help="pulse duration in s (0: instantaneous impulse, magnitudes in N s)")
-    p.add_argument("--max", type=number(float, lo=0.0, hi=1e6, lo_open=True), default=20.0,
-                   help="bisection upper bound")
-    p.add_argument("--iterations", type=count(1, 60), default=12,
-                   help="bisection halvings (1 to 60)")
-    p.add_argument("--steps", type=count(1, 100_000), default=30,
-                   help="steps after the push")
-    p.add_argument("--check", action="store_true",
-                   help="also compute the sensitivity by transverse linearization")
+    p.add_argument(
+        "--phases", type=count(1, 10_000), default=20, help="phases in [0, 1) (default 20)"
+    )
+    p.add_argument(
+        "--directions-deg",
+        type=FINITE,
+        nargs="+",
+        default=[0, 90, 180, 270],
+        help="push directions, degrees from forward, counter-clockwise",
+    )
+    p.add_argument(
+        "--duration",
+        type=number(float, lo=0.0, hi=10.0),
+        default=0.0,
+        help="pulse duration in s (0: instantaneous impulse, magnitudes in N s)",
+    )
+    p.add_argument(
+        "--max",
+        type=number(float, lo=0.0, hi=1e6, lo_open=True),
+        default=20.0,
+        help="bisection upper bound",
+    )
+    p.add_argument(
+        "--iterations", type=count(1, 60), default=12, help="bisection halvings (1 to 60)"
+    )
+    p.add_argument("--steps", type=count(1, 100_000), default=30, help="steps after the push")
+    p.add_argument(
+        "--check",
+        action="store_true",
+        help="also compute the sensitivity by transverse linearization",
+    )
     p.set_defaults(func=run_push)
 
 
@@ -129,24 +206,37 @@ def run_contraction(args):
 
     cells = args.perturbations * (args.steps + 1)
     if cells > MAX_RECOVERY_CELLS:
-        raise CLIError(f"--perturbations {args.perturbations} x --steps {args.steps} keeps "
-                       f"{cells:,} distances (about {cells * 8 / 1e9:.1f} GB); at most "
-                       f"{MAX_RECOVERY_CELLS:,}")
+        raise CLIError(
+            f"--perturbations {args.perturbations} x --steps {args.steps} keeps "
+            f"{cells:,} distances (about {cells * 8 / 1e9:.1f} GB); at most "
+            f"{MAX_RECOVERY_CELLS:,}"
+        )
     check_output_file(args.png, "--png")
     model, z, _, period, zn = _gait(args)
-    c = contraction(model, z, num_perturbations=args.perturbations, scale=args.scale,
-                    num_steps=args.steps, fit_window=(5, args.steps))
+    c = contraction(
+        model,
+        z,
+        num_perturbations=args.perturbations,
+        scale=args.scale,
+        num_steps=args.steps,
+        fit_window=(5, args.steps),
+    )
     out = {
-        "gait": zn, "period": period, "multipliers": c.multipliers,
-        "spectral_radius": c.spectral_radius, "steps_10x": c.steps_10x,
-        "steps_100x": c.steps_100x, "measured_rate": c.measured_rate,
+        "gait": zn,
+        "period": period,
+        "multipliers": c.multipliers,
+        "spectral_radius": c.spectral_radius,
+        "steps_10x": c.steps_10x,
+        "steps_100x": c.steps_100x,
+        "measured_rate": c.measured_rate,
         "measured_steps_10x": c.measured_steps_10x,
         "measured_steps_100x": c.measured_steps_100x,
     }
     for k, f in (("10x", 10), ("100x", 100)):
         if not math.isfinite(float(out[f"measured_steps_{k}"])):
             out[f"measured_steps_{k}_reason"] = (
-                f"no recovery shrank its error {f}x within --steps {args.steps} steps")
+                f"no recovery shrank its error {f}x within --steps {args.steps} steps"
+            )
     if args.png:
         from ..plotting import plot_contraction
 
@@ -154,13 +244,17 @@ def run_contraction(args):
     if args.json:
         print_json(out)
     else:
-        print(f"spectral radius {float(c.spectral_radius):.6f} (multipliers); measured "
-              f"{float(c.measured_rate):.6f} from {args.perturbations} recoveries")
+        print(
+            f"spectral radius {float(c.spectral_radius):.6f} (multipliers); measured "
+            f"{float(c.measured_rate):.6f} from {args.perturbations} recoveries"
+        )
         for k in ("10x", "100x"):
             m = float(out[f"measured_steps_{k}"])
             meas = f"{m:.0f} measured" if math.isfinite(m) else out[f"measured_steps_{k}_reason"]
-            print(f"steps to shrink an error {k}: {float(out[f'steps_{k}']):.2f} predicted, "
-                  f"{meas}" + (" (median, transient included)" if k == "10x" else ""))
+            print(
+                f"steps to shrink an error {k}: {float(out[f'steps_{k}']):.2f} predicted, "
+                f"{meas}" + (" (median, transient included)" if k == "10x" else "")
+            )
 
 
 def run_basin(args):
@@ -171,34 +265,69 @@ def run_basin(args):
     try:
         axes = tuple(AXIS_NAMES.index(a.strip()) for a in args.axes.split(","))
     except ValueError:
-        raise CLIError(f"--axes must be two of {','.join(AXIS_NAMES)}, got {args.axes!r}")
+        raise CLIError(f"--axes must be two of {','.join(AXIS_NAMES)}, got {args.axes!r}") from None
     if len(axes) != 2 or axes[0] == axes[1]:
         raise CLIError(f"--axes needs two different coordinates, got {args.axes!r}")
     points = args.grid[0] * args.grid[1]
     if points > MAX_GRID_POINTS:
-        raise CLIError(f"--grid {args.grid[0]} {args.grid[1]} is {points:,} points (one "
-                       f"simulation each, about {points * 100 / 1e9:.1f} GB of results in "
-                       f"memory); at most {MAX_GRID_POINTS:,}: use a coarser grid or several "
-                       "runs over smaller --half-widths")
+        raise CLIError(
+            f"--grid {args.grid[0]} {args.grid[1]} is {points:,} points (one "
+            f"simulation each, about {points * 100 / 1e9:.1f} GB of results in "
+            f"memory); at most {MAX_GRID_POINTS:,}: use a coarser grid or several "
+            "runs over smaller --half-widths"
+        )
     check_output_file(args.png, "--png")
     model, z, _, period, zn = _gait(args)
-    b = basin_slice(model, z, axes=axes, half_widths=tuple(args.half_widths),
-                    shape=tuple(args.grid), num_steps=args.steps, tol=args.tol,
-                    chunk=args.chunk, progress=_bar(args))
-    counts = {n: int(np.sum(b.label == i)) for i, n in
-              enumerate(("converged", "fell", "other_cycle", "undecided"))}
-    out = {"gait": zn, "axes": [AXIS_NAMES[a] for a in axes], "grid": list(args.grid),
-           "area": b.area, "fraction": b.fraction, "counts": counts,
-           "max_converging": {k.replace("x", AXIS_NAMES[axes[0]]).replace(
-               "y", AXIS_NAMES[axes[1]]): v for k, v in b.max_converging.items()},
-           "offsets_x": b.offsets_x, "offsets_y": b.offsets_y, "label": b.label,
-           "steps": b.steps}
+    b = basin_slice(
+        model,
+        z,
+        axes=axes,
+        half_widths=tuple(args.half_widths),
+        shape=tuple(args.grid),
+        num_steps=args.steps,
+        tol=args.tol,
+        chunk=args.chunk,
+        progress=_bar(args),
+    )
+    counts = {
+        n: int(np.sum(b.label == i))
+        for i, n in enumerate(("converged", "fell", "other_cycle", "undecided"))
+    }
+    out = {
+        "gait": zn,
+        "axes": [AXIS_NAMES[a] for a in axes],
+        "grid": list(args.grid),
+        "area": b.area,
+        "fraction": b.fraction,
+        "counts": counts,
+        "max_converging": {
+            k.replace("x", AXIS_NAMES[axes[0]]).replace("y", AXIS_NAMES[axes[1]]): v
+            for k, v in b.max_converging.items()
+        },
+        "offsets_x": b.offsets_x,
+        "offsets_y": b.offsets_y,
+        "label": b.label,
+        "steps": b.steps,
+    }
     if args.volume_samples > 0:
-        v = basin_volume(model, z, args.box, num_samples=args.volume_samples, tol=args.tol,
-                         num_steps=args.steps, chunk=args.chunk, progress=_bar(args))
-        out["volume"] = {"box_half_widths": args.box, "fraction": v.fraction,
-                         "interval_95": v.interval, "volume": v.volume,
-                         "counts": v.counts, "samples": v.num_samples}
+        v = basin_volume(
+            model,
+            z,
+            args.box,
+            num_samples=args.volume_samples,
+            tol=args.tol,
+            num_steps=args.steps,
+            chunk=args.chunk,
+            progress=_bar(args),
+        )
+        out["volume"] = {
+            "box_half_widths": args.box,
+            "fraction": v.fraction,
+            "interval_95": v.interval,
+            "volume": v.volume,
+            "counts": v.counts,
+            "samples": v.num_samples,
+        }
     if args.png:
         from ..plotting import plot_basin
 
@@ -206,14 +335,20 @@ def run_basin(args):
     if args.json:
         print_json(out)
     else:
-        print(f"slice {args.axes}: converging fraction {b.fraction:.4f}, area {b.area:.5g}; "
-              f"counts {counts}")
-        print("largest converging offset along the grid lines through the gait: "
-              + ", ".join(f"{k} {v:.4g}" for k, v in out["max_converging"].items()))
+        print(
+            f"slice {args.axes}: converging fraction {b.fraction:.4f}, area {b.area:.5g}; "
+            f"counts {counts}"
+        )
+        print(
+            "largest converging offset along the grid lines through the gait: "
+            + ", ".join(f"{k} {v:.4g}" for k, v in out["max_converging"].items())
+        )
         if "volume" in out:
             vv = out["volume"]
-            print(f"3-D box +-{args.box}: fraction {vv['fraction']:.4f}, 95% CI "
-                  f"[{vv['interval_95'][0]:.4f}, {vv['interval_95'][1]:.4f}]")
+            print(
+                f"3-D box +-{args.box}: fraction {vv['fraction']:.4f}, 95% CI "
+                f"[{vv['interval_95'][0]:.4f}, {vv['interval_95'][1]:.4f}]"
+            )
 
 
 def run_slope(args):
@@ -231,11 +366,19 @@ def run_slope(args):
         from ..robustness import slope_sensitivity
 
         s = slope_sensitivity(model, z)
-        out["per_rad"] = {"dz": s.dz, "dperiod": s.dperiod, "dstep_length": s.dstep_length,
-                          "dspeed": s.dspeed, "dmultipliers": s.dmultipliers,
-                          "dmodulus": s.dmodulus}
-        out["values"] = {"step_length": s.step_length, "speed": s.speed,
-                         "multipliers": s.multipliers}
+        out["per_rad"] = {
+            "dz": s.dz,
+            "dperiod": s.dperiod,
+            "dstep_length": s.dstep_length,
+            "dspeed": s.dspeed,
+            "dmultipliers": s.dmultipliers,
+            "dmodulus": s.dmodulus,
+        }
+        out["values"] = {
+            "step_length": s.step_length,
+            "speed": s.speed,
+            "multipliers": s.multipliers,
+        }
     g = gait_sensitivity_norm(model, x_star, args.steps)
     out["gait_sensitivity_norm"] = g.norm
     out["dtimes_dh"] = g.dtimes[:10]
@@ -249,23 +392,29 @@ def run_slope(args):
         from ..plotting import plot_slope, plot_terrain
 
         full = terrain_recovery(model, x_star, hs, args.steps, 0.0, stop_when_converged=False)
-        plot_terrain(np.asarray(hs), full, period, args.png, float(g.norm),
-                     case=f"gait at {describe(args)}")
+        plot_terrain(
+            np.asarray(hs), full, period, args.png, float(g.norm), case=f"gait at {describe(args)}"
+        )
         if not args.no_derivatives:
-            plot_slope(s, args.png.removesuffix(".png") + "-slope.png",
-                       case=f"gait at {describe(args)}")
+            plot_slope(
+                s, args.png.removesuffix(".png") + "-slope.png", case=f"gait at {describe(args)}"
+            )
     if args.json:
         print_json(out)
     else:
         if "per_rad" in out:
             d = out["per_rad"]
-            print(f"per degree of slope: dT {float(d['dperiod']) * math.pi / 180:+.5f} s, "
-                  f"dv {float(d['dspeed']) * math.pi / 180:+.5f} m/s, d|lambda| "
-                  f"{np.round(np.asarray(d['dmodulus']) * math.pi / 180, 5)}")
+            print(
+                f"per degree of slope: dT {float(d['dperiod']) * math.pi / 180:+.5f} s, "
+                f"dv {float(d['dspeed']) * math.pi / 180:+.5f} m/s, d|lambda| "
+                f"{np.round(np.asarray(d['dmodulus']) * math.pi / 180, 5)}"
+            )
         print(f"gait sensitivity norm (floor height -> step time): {float(g.norm):.4f} s/m")
-        print(f"largest step down survived: {1000 * th.lo[0]:.2f} mm (falls at "
-              f"{1000 * th.hi[0]:.2f}); step up: {1000 * th.lo[1]:.2f} mm (falls at "
-              f"{1000 * th.hi[1]:.2f})")
+        print(
+            f"largest step down survived: {1000 * th.lo[0]:.2f} mm (falls at "
+            f"{1000 * th.hi[0]:.2f}); step up: {1000 * th.lo[1]:.2f} mm (falls at "
+            f"{1000 * th.hi[1]:.2f})"
+        )
 
 
 def run_push(args):
@@ -279,8 +428,7 @@ def run_push(args):
     phases = np.arange(args.phases) / args.phases
     angles = np.radians(np.asarray(args.directions_deg, float))
     D = push_sensitivity_autodiff(model, x_star, period, jnp.asarray(phases))
-    out = {"gait": zn, "period": period, "phases": phases,
-           "sensitivity_dxplus_dP": D}
+    out = {"gait": zn, "period": period, "phases": phases, "sensitivity_dxplus_dP": D}
     if args.check:
         from ..hybrid import step
 
@@ -289,26 +437,53 @@ def run_push(args):
         zad = np.einsum("ij,sjk->sik", np.asarray(lin.P_plus), np.asarray(D))
         out["transverse_dzeta_dP"] = Z
         out["max_abs_difference_autodiff_vs_transverse"] = float(np.max(np.abs(zad - Z)))
-    res = max_push(model, x_star, period, phases, angles, p_max=args.max,
-                   duration=args.duration, iterations=args.iterations,
-                   num_steps=args.steps, progress=_bar(args))
+    res = max_push(
+        model,
+        x_star,
+        period,
+        phases,
+        angles,
+        p_max=args.max,
+        duration=args.duration,
+        iterations=args.iterations,
+        num_steps=args.steps,
+        progress=_bar(args),
+    )
     unit = "N s" if args.duration == 0 else "N"
-    out.update({"directions_deg": args.directions_deg, "unit": unit,
-                "largest": res.largest, "falls_at": res.threshold.hi.reshape(res.largest.shape),
-                "most_fragile_phase": res.most_fragile_phase})
+    out.update(
+        {
+            "directions_deg": args.directions_deg,
+            "unit": unit,
+            "largest": res.largest,
+            "falls_at": res.threshold.hi.reshape(res.largest.shape),
+            "most_fragile_phase": res.most_fragile_phase,
+        }
+    )
     if args.png:
         from ..plotting import plot_push
 
-        plot_push(phases, D, angles, res.largest, args.png, unit, p_max=args.max,
-                  case=f"gait at {describe(args)}")
+        plot_push(
+            phases,
+            D,
+            angles,
+            res.largest,
+            args.png,
+            unit,
+            p_max=args.max,
+            case=f"gait at {describe(args)}",
+        )
     if args.json:
         print_json(out)
     else:
         for j, a in enumerate(args.directions_deg):
             col = res.largest[:, j]
-            print(f"direction {a:g} deg: largest push survived {np.nanmin(col):.4g}-"
-                  f"{np.nanmax(col):.4g} {unit}; most fragile at phase "
-                  f"{res.most_fragile_phase[j]:.2f}")
+            print(
+                f"direction {a:g} deg: largest push survived {np.nanmin(col):.4g}-"
+                f"{np.nanmax(col):.4g} {unit}; most fragile at phase "
+                f"{res.most_fragile_phase[j]:.2f}"
+            )
         if args.check:
-            print("autodiff vs transverse linearization: max difference "
-                  f"{out['max_abs_difference_autodiff_vs_transverse']:.2e}")
+            print(
+                "autodiff vs transverse linearization: max difference "
+                f"{out['max_abs_difference_autodiff_vs_transverse']:.2e}"
+            )

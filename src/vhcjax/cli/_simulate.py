@@ -4,8 +4,15 @@ import math
 import os
 
 from ._common import (
-    FINITE, CLIError, add_model_flags, describe, check_output_dir, check_output_file, count,
-    model_from_args, print_json,
+    FINITE,
+    CLIError,
+    add_model_flags,
+    check_output_dir,
+    check_output_file,
+    count,
+    describe,
+    model_from_args,
+    print_json,
 )
 
 THESIS_7_5 = (0.218669, -0.323389, -1.092386, -0.377377)  # thesis (7.5), 3 degrees
@@ -22,18 +29,31 @@ def register(subparsers):
         "Angles in radians (except --slope-deg), velocities in rad/s.",
     )
     add_model_flags(p)
-    p.add_argument("--x0", type=FINITE, nargs=4, metavar=("Q1", "Q2", "DQ1", "DQ2"),
-                   default=list(THESIS_7_5),
-                   help="initial state: stance and swing leg angles (rad, from the vertical, "
-                   "counter-clockwise) and their rates (rad/s); default: thesis (7.5)")
-    p.add_argument("--steps", type=count(1, MAX_STEPS), default=20,
-                   help=f"number of steps, 1 to {MAX_STEPS} (default 20)")
-    p.add_argument("--json", action="store_true",
-                   help="print one JSON object {result, steps: [{x_plus, x_minus, period, "
-                   "result}, ...]} instead of a table")
+    p.add_argument(
+        "--x0",
+        type=FINITE,
+        nargs=4,
+        metavar=("Q1", "Q2", "DQ1", "DQ2"),
+        default=list(THESIS_7_5),
+        help="initial state: stance and swing leg angles (rad, from the vertical, "
+        "counter-clockwise) and their rates (rad/s); default: thesis (7.5)",
+    )
+    p.add_argument(
+        "--steps",
+        type=count(1, MAX_STEPS),
+        default=20,
+        help=f"number of steps, 1 to {MAX_STEPS} (default 20)",
+    )
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print one JSON object {result, steps: [{x_plus, x_minus, period, "
+        "result}, ...]} instead of a table",
+    )
     p.add_argument("--animate", metavar="GIF", help="save an animation of the walk as a GIF")
-    p.add_argument("--plots", metavar="DIR",
-                   help="save states.png, phase.png and periods.png into DIR")
+    p.add_argument(
+        "--plots", metavar="DIR", help="save states.png, phase.png and periods.png into DIR"
+    )
     p.set_defaults(func=run)
     return p
 
@@ -51,9 +71,11 @@ def _check_start(model, x0):
     if float(model.hip_height(q)) <= 0:
         raise CLIError(f"--x0 puts the hip below the slope (q1 = {x0[0]} rad)")
     if x0[1] > x0[0] and float(model.swing_foot_height(q)) < -tol:
-        raise CLIError(f"--x0 puts the swing foot below the slope, ahead of the stance leg "
-                       f"(q1 = {x0[0]}, q2 = {x0[1]} rad); a post-impact state has "
-                       "q2 = -q1 - 2 psi")
+        raise CLIError(
+            f"--x0 puts the swing foot below the slope, ahead of the stance leg "
+            f"(q1 = {x0[0]}, q2 = {x0[1]} rad); a post-impact state has "
+            "q2 = -q1 - 2 psi"
+        )
 
 
 def steps_as_dicts(sim):
@@ -70,20 +92,22 @@ def steps_as_dicts(sim):
     out = []
     for i in range(n):
         good = names[i] == "successful"
-        out.append({
-            "x_plus": xp[i].tolist() if good else None,
-            "x_minus": xm[i].tolist(),
-            "period": float(T[i]),
-            "result": names[i],
-        })
+        out.append(
+            {
+                "x_plus": xp[i].tolist() if good else None,
+                "x_minus": xm[i].tolist(),
+                "period": float(T[i]),
+                "result": names[i],
+            }
+        )
     return out
 
 
 def run(args):
     import jax.numpy as jnp
 
-    from ..hybrid import simulate_jit
     from .._results import result_names
+    from ..hybrid import simulate_jit
 
     model = model_from_args(args)
     _check_start(model, args.x0)
@@ -99,29 +123,33 @@ def run(args):
 
     if args.plots:
         from .. import plotting as plotting
+
         if int(sim.num_successful) > 0:
             case = f"{describe(args)}, from x0 = {list(args.x0)}"
             plotting.plot_states(sim, path=os.path.join(args.plots, "states.png"), case=case)
-            plotting.plot_phase_portrait(sim, path=os.path.join(args.plots, "phase.png"),
-                                         case=case)
-            plotting.plot_step_periods(sim, path=os.path.join(args.plots, "periods.png"),
-                                       case=case)
+            plotting.plot_phase_portrait(sim, path=os.path.join(args.plots, "phase.png"), case=case)
+            plotting.plot_step_periods(sim, path=os.path.join(args.plots, "periods.png"), case=case)
     if args.animate:
         from .. import plotting as plotting
+
         if int(sim.num_successful) > 0:
             plotting.animate(sim, model, args.animate)
 
     if args.json:
-        print_json({"result": result, "num_successful": int(sim.num_successful),
-                    "steps": steps})
+        print_json({"result": result, "num_successful": int(sim.num_successful), "steps": steps})
     else:
         print(f"slope {math.degrees(float(model.psi)):g} deg, x0 = {list(args.x0)}")
-        print(f"{'step':>4} {'period (s)':>11}  {'q1+':>10} {'q2+':>10} {'dq1+':>10} "
-              f"{'dq2+':>10}  result")
+        print(
+            f"{'step':>4} {'period (s)':>11}  {'q1+':>10} {'q2+':>10} {'dq1+':>10} "
+            f"{'dq2+':>10}  result"
+        )
         for i, s in enumerate(steps, 1):
             x = s["x_plus"] if s["x_plus"] is not None else s["x_minus"]
-            print(f"{i:>4} {s['period']:>11.8f}  " + " ".join(f"{v:>10.6f}" for v in x)
-                  + f"  {s['result']}")
+            print(
+                f"{i:>4} {s['period']:>11.8f}  "
+                + " ".join(f"{v:>10.6f}" for v in x)
+                + f"  {s['result']}"
+            )
         print(f"result: {result} ({int(sim.num_successful)}/{args.steps} steps)")
         if int(sim.num_successful) == 0 and (args.plots or args.animate):
             print("no completed step: no figures written")

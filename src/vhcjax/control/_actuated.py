@@ -15,8 +15,8 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from ..hybrid import DEFAULT_CONFIG, StepResult, flow, step_unchecked
 from .._results import RESULTS
+from ..hybrid import DEFAULT_CONFIG, StepResult, flow, step_unchecked
 
 
 def input_matrix(model, q):
@@ -63,7 +63,8 @@ def _single_domain(model):
     if hasattr(model, "hybrid_step"):
         raise NotImplementedError(
             f"{type(model).__name__} is a multi-domain model: closed-loop steps are "
-            "implemented for single-domain walkers only")
+            "implemented for single-domain walkers only"
+        )
 
 
 def closed_loop_step(model, x0, feedback, config=DEFAULT_CONFIG, alive=True):
@@ -83,8 +84,15 @@ def step_torque(model, x0, period, feedback, num_points=64, config=DEFAULT_CONFI
     **Returns:** `(ts, u)` with shapes `(num_points,)` and `(num_points, m)`.
     """
     ts = jnp.linspace(0.0, 1.0, num_points) * period
-    sol = flow(model, x0, period + 1e-12, config, saveat=diffrax.SaveAt(ts=ts), event=False,
-               vector_field=closed_loop_field(model, feedback))
+    sol = flow(
+        model,
+        x0,
+        period + 1e-12,
+        config,
+        saveat=diffrax.SaveAt(ts=ts),
+        event=False,
+        vector_field=closed_loop_field(model, feedback),
+    )
     u = jax.vmap(lambda x: feedback(x, model))(sol.ys)
     return ts, u
 
@@ -110,8 +118,9 @@ class ClosedLoopSimulation(eqx.Module):
     rms_torque: jax.Array
 
 
-def simulate_closed_loop(model, x0, feedback, num_steps, *, config=DEFAULT_CONFIG,
-                         torque_points=32):
+def simulate_closed_loop(
+    model, x0, feedback, num_steps, *, config=DEFAULT_CONFIG, torque_points=32
+):
     """Simulate `num_steps` steps of the walker under `feedback` from the post-impact
     state `x0` (pure, jittable, `vmap` over `x0`).
 
@@ -137,14 +146,20 @@ def simulate_closed_loop(model, x0, feedback, num_steps, *, config=DEFAULT_CONFI
         result = RESULTS.where(alive, sr.result, first_fail)
         x_next = jnp.where(ok, sr.x_plus, x)
         if torque_points:
-            _, u = step_torque(model, x, jnp.where(ok, sr.period, 1e-9), feedback,
-                               torque_points, config)
+            _, u = step_torque(
+                model, x, jnp.where(ok, sr.period, 1e-9), feedback, torque_points, config
+            )
             umax = jnp.where(ok, jnp.max(jnp.abs(u)), 0.0)
             urms = jnp.where(ok, jnp.sqrt(jnp.mean(u**2)), 0.0)
         else:
             umax = urms = jnp.zeros((), x.dtype)
-        out = StepResult(jnp.where(alive, sr.x_minus, x), x_next,
-                         jnp.where(alive, sr.period, 0.0), sr.impulse, result)
+        out = StepResult(
+            jnp.where(alive, sr.x_minus, x),
+            x_next,
+            jnp.where(alive, sr.period, 0.0),
+            sr.impulse,
+            result,
+        )
         return (x_next, ok, new_fail), (out, umax, urms)
 
     init = (x0, jnp.asarray(True), RESULTS.successful)

@@ -16,9 +16,9 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, SolverConfig, flow
 from ..robustness import direction, finish_step, impulse_velocity_jump, swing_from
-from .._results import RESULTS
 from ._actuated import closed_loop_field, closed_loop_step, num_inputs, simulate_closed_loop
 from ._feedback import TransverseFeedback, transverse_feedback
 from ._riccati import RiccatiSolution, riccati_backward, riccati_hamiltonian
@@ -33,8 +33,9 @@ def _sort(ev):
     return ev[jnp.argsort(-jnp.abs(ev))]
 
 
-def closed_loop_multipliers_transverse(model, system, feedback, *, rtol=1e-12, atol=1e-12,
-                                       max_steps=8192):
+def closed_loop_multipliers_transverse(
+    model, system, feedback, *, rtol=1e-12, atol=1e-12, max_steps=8192
+):
     """Closed-loop multipliers from the transverse linearization: eigenvalues of
     $J\\,\\Phi_{cl}(1)$, $d\\Phi_{cl}/ds = (dt/ds)(A - BK(s))\\Phi_{cl}$, with $K(s)$ the
     gain interpolant of `feedback` (saturation inactive at the orbit). Sorted by modulus.
@@ -52,9 +53,16 @@ def closed_loop_multipliers_transverse(model, system, feedback, *, rtol=1e-12, a
 
     y0 = jnp.concatenate([system.w[0], jnp.eye(r).reshape(-1)])
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(field), diffrax.Tsit5(), t0=0.0, t1=1.0, dt0=None, y0=y0,
+        diffrax.ODETerm(field),
+        diffrax.Tsit5(),
+        t0=0.0,
+        t1=1.0,
+        dt0=None,
+        y0=y0,
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-        max_steps=max_steps, throw=False)
+        max_steps=max_steps,
+        throw=False,
+    )
     assert sol.ys is not None  # saved at t1
     return _sort(jnp.linalg.eigvals(system.J @ sol.ys[-1, r:].reshape(r, r)))
 
@@ -106,8 +114,17 @@ class Stabilization(eqx.Module):
     result: RESULTS
 
 
-def stabilize(model, z, Q=None, R=None, Q_jump=None, *, torque_limit: float | jax.Array = jnp.inf,
-              num_points=401, config=TIGHT_CONFIG):
+def stabilize(
+    model,
+    z,
+    Q=None,
+    R=None,
+    Q_jump=None,
+    *,
+    torque_limit: float | jax.Array = jnp.inf,
+    num_points=401,
+    config=TIGHT_CONFIG,
+):
     """Stabilize the period-1 gait with post-impact section coordinates `z` by
     transverse-linearization feedback (Shiriaev et al. 2008; Freidovich, Shiriaev and
     Manchester 2008; Manchester 2011).
@@ -138,8 +155,19 @@ def stabilize(model, z, Q=None, R=None, Q_jump=None, *, torque_limit: float | ja
     code = system.result
     for c in (ric.result, ric2.result):
         code = RESULTS.where(code == RESULTS.successful, c, code)
-    return Stabilization(system, ric, ric2, agree, fb, system.multipliers, jac, cl_p, cl_t,
-                         jnp.max(jnp.abs(ric.K)), code)
+    return Stabilization(
+        system,
+        ric,
+        ric2,
+        agree,
+        fb,
+        system.multipliers,
+        jac,
+        cl_p,
+        cl_t,
+        jnp.max(jnp.abs(ric.K)),
+        code,
+    )
 
 
 class ClosedLoopBasin(eqx.Module):
@@ -164,9 +192,19 @@ class ClosedLoopBasin(eqx.Module):
     axes: tuple = eqx.field(static=True)
 
 
-def closed_loop_basin(model, feedback, z_star, *, axes=(0, 1), half_widths=(0.05, 0.3),
-                      shape=(21, 21), num_steps=30, tol=1e-4, torque_points=16,
-                      config=DEFAULT_CONFIG):
+def closed_loop_basin(
+    model,
+    feedback,
+    z_star,
+    *,
+    axes=(0, 1),
+    half_widths=(0.05, 0.3),
+    shape=(21, 21),
+    num_steps=30,
+    tol=1e-4,
+    torque_points=16,
+    config=DEFAULT_CONFIG,
+):
     """Basin slice of the gait `z_star` under `feedback` (use `ZeroFeedback` for the
     passive walker: the same code path). Jittable; all points in one `vmap`.
 
@@ -180,8 +218,14 @@ def closed_loop_basin(model, feedback, z_star, *, axes=(0, 1), half_widths=(0.05
     Z = Z.at[..., axes[0]].add(X).at[..., axes[1]].add(Y).reshape(-1, z_star.shape[0])
 
     def one(z):
-        sim = simulate_closed_loop(model, model.section_to_state(z), feedback, num_steps,
-                                   config=config, torque_points=torque_points)
+        sim = simulate_closed_loop(
+            model,
+            model.section_to_state(z),
+            feedback,
+            num_steps,
+            config=config,
+            torque_points=torque_points,
+        )
         zf = model.state_to_section(sim.steps.x_plus[-1])
         ok = sim.result == RESULTS.successful
         conv = ok & (jnp.max(jnp.abs(zf - z_star)) < tol)
@@ -189,13 +233,19 @@ def closed_loop_basin(model, feedback, z_star, *, axes=(0, 1), half_widths=(0.05
 
     conv, fell, umax, urms = jax.vmap(one)(Z)
     conv = conv.reshape(shape)
-    return ClosedLoopBasin(ox, oy, conv, fell.reshape(shape), jnp.mean(conv),
-                           umax.reshape(shape), urms.reshape(shape), tuple(axes))
+    return ClosedLoopBasin(
+        ox,
+        oy,
+        conv,
+        fell.reshape(shape),
+        jnp.mean(conv),
+        umax.reshape(shape),
+        urms.reshape(shape),
+        tuple(axes),
+    )
 
 
-
-def closed_loop_push_step(model, feedback, x0, t_push, impulse, config=DEFAULT_CONFIG,
-                          alive=True):
+def closed_loop_push_step(model, feedback, x0, t_push, impulse, config=DEFAULT_CONFIG, alive=True):
     """One step of the walker under `feedback` from the post-impact state `x0`, with a hip
     impulse `impulse` (N s, world frame) at time `t_push` into the step (as
     `vhcjax.impulse_step`, which is the passive case). **Returns:** a `StepResult`."""
@@ -204,30 +254,48 @@ def closed_loop_push_step(model, feedback, x0, t_push, impulse, config=DEFAULT_C
     t_max = config.t_max_factor * model.time_scale
     t_s = jnp.maximum(t_push, 1e-12)
     alive = jnp.asarray(alive)
-    sol0 = flow(model, x0, jnp.where(alive, t_s, 1e-12), config, event=False,
-                vector_field=field)
+    sol0 = flow(model, x0, jnp.where(alive, t_s, 1e-12), config, event=False, vector_field=field)
     assert sol0.ys is not None  # saved at t1
     xs = sol0.ys[-1]
     x_k = xs.at[n:].add(impulse_velocity_jump(model, xs[:n], impulse))
     bad = model.fallen(xs[:n]) | model.fallen(x_k[:n]) | ~jnp.all(jnp.isfinite(x_k))
-    x_minus, t_end, code = swing_from(model, x_k, jnp.where(alive, t_s, 1e-12),
-                                       jnp.where(alive, t_max, 2e-12), config,
-                                       vector_field=field)
+    x_minus, t_end, code = swing_from(
+        model,
+        x_k,
+        jnp.where(alive, t_s, 1e-12),
+        jnp.where(alive, t_max, 2e-12),
+        config,
+        vector_field=field,
+    )
     code = RESULTS.where(bad, RESULTS.fell, code)
     return finish_step(model, x_minus, t_end, code, x0)
 
 
 def _push_survives(model, feedback, x_star, t_push, impulse, num_steps, tol, config):
     sr = closed_loop_push_step(model, feedback, x_star, t_push, impulse, config)
-    sim = simulate_closed_loop(model, sr.x_plus, feedback, num_steps, config=config,
-                               torque_points=0)
-    err = jnp.max(jnp.abs(model.state_to_section(sim.steps.x_plus[-1])
-                          - model.state_to_section(x_star)))
+    sim = simulate_closed_loop(
+        model, sr.x_plus, feedback, num_steps, config=config, torque_points=0
+    )
+    err = jnp.max(
+        jnp.abs(model.state_to_section(sim.steps.x_plus[-1]) - model.state_to_section(x_star))
+    )
     return (sr.result == RESULTS.successful) & (sim.result == RESULTS.successful) & (err < tol)
 
 
-def closed_loop_max_push(model, feedback, x_star, period, phases, angles, *, p_max=20.0,
-                         iterations=10, num_steps=30, tol=1e-4, config=DEFAULT_CONFIG):
+def closed_loop_max_push(
+    model,
+    feedback,
+    x_star,
+    period,
+    phases,
+    angles,
+    *,
+    p_max=20.0,
+    iterations=10,
+    num_steps=30,
+    tol=1e-4,
+    config=DEFAULT_CONFIG,
+):
     """Largest hip impulse (N s) after which the walker under `feedback` returns within
     `tol` of the gait in `num_steps` steps, per phase and direction (bisection on
     $[0, p_{max}]$ assuming survival is monotone in the magnitude; `vmap` over the grid).
@@ -277,13 +345,29 @@ def _as_weights(model, Q, R, Q_jump):
     return Q, mat(R, m), Q if Q_jump is None else mat(Q_jump, r)
 
 
-def _stabilize(model, z, Q=None, R=None, Q_jump=None, *, torque_limit: float | jax.Array = jnp.inf,
-               num_points=401, config=TIGHT_CONFIG):
+def _stabilize(
+    model,
+    z,
+    Q=None,
+    R=None,
+    Q_jump=None,
+    *,
+    torque_limit: float | jax.Array = jnp.inf,
+    num_points=401,
+    config=TIGHT_CONFIG,
+):
     # Weights, torque limit and gait as arrays: one compiled program serves them all.
     Q, R, Q_jump = _as_weights(model, Q, R, Q_jump)
-    return _stabilize_jit(model, jnp.asarray(z, float), Q, R, Q_jump,
-                          torque_limit=jnp.asarray(torque_limit, float),
-                          num_points=num_points, config=config)
+    return _stabilize_jit(
+        model,
+        jnp.asarray(z, float),
+        Q,
+        R,
+        Q_jump,
+        torque_limit=jnp.asarray(torque_limit, float),
+        num_points=num_points,
+        config=config,
+    )
 
 
 _stabilize.__doc__ = stabilize.__doc__

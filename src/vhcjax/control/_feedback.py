@@ -38,8 +38,9 @@ def catmull_rom(values, s):
     (one-sided at the ends)."""
     n = values.shape[0] - 1
     inner = (values[2:] - values[:-2]) * (0.5 * n)
-    slopes = jnp.concatenate([((values[1] - values[0]) * n)[None], inner,
-                              ((values[-1] - values[-2]) * n)[None]])
+    slopes = jnp.concatenate(
+        [((values[1] - values[0]) * n)[None], inner, ((values[-1] - values[-2]) * n)[None]]
+    )
     return hermite(values, slopes, s)
 
 
@@ -85,11 +86,16 @@ class TransverseFeedback(eqx.Module):
 
 def transverse_feedback(system, riccati, torque_limit: float | jax.Array = jnp.inf):
     """The `TransverseFeedback` of a `TransverseSystem` and its `RiccatiSolution`."""
-    return TransverseFeedback(system.theta_plus, system.theta_minus, system.w, system.dw,
-                              riccati.K, jnp.asarray(torque_limit, float))
+    return TransverseFeedback(
+        system.theta_plus,
+        system.theta_minus,
+        system.w,
+        system.dw,
+        riccati.K,
+        jnp.asarray(torque_limit, float),
+    )
 
 
 def with_torque_limit(feedback, torque_limit):
     """`feedback` with another saturation level (a leaf: no recompilation)."""
     return eqx.tree_at(lambda f: f.torque_limit, feedback, jnp.asarray(torque_limit, float))
-

@@ -71,8 +71,19 @@ def _sym(X):
     return 0.5 * (X + X.T)
 
 
-def riccati_backward(model, system, Q=None, R=None, Q_jump=None, *, tol=1e-13,
-                     max_iterations=200, rtol=1e-12, atol=1e-12, max_steps=8192):
+def riccati_backward(
+    model,
+    system,
+    Q=None,
+    R=None,
+    Q_jump=None,
+    *,
+    tol=1e-13,
+    max_iterations=200,
+    rtol=1e-12,
+    atol=1e-12,
+    max_steps=8192,
+):
     """Periodic $X(s)$ by backward integration repeated to convergence.
 
     **Arguments:**
@@ -103,9 +114,17 @@ def riccati_backward(model, system, Q=None, R=None, Q_jump=None, *, tol=1e-13,
     def sweep(X1, saveat):
         y0 = jnp.concatenate([system.w[-1], X1.reshape(-1)])
         return diffrax.diffeqsolve(
-            diffrax.ODETerm(field), diffrax.Tsit5(), t0=1.0, t1=0.0, dt0=None, y0=y0,
+            diffrax.ODETerm(field),
+            diffrax.Tsit5(),
+            t0=1.0,
+            t1=0.0,
+            dt0=None,
+            y0=y0,
             stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-            saveat=saveat, max_steps=max_steps, throw=False)
+            saveat=saveat,
+            max_steps=max_steps,
+            throw=False,
+        )
 
     def jump(X0):
         return _sym(system.J.T @ X0 @ system.J + Q_jump)
@@ -126,12 +145,16 @@ def riccati_backward(model, system, Q=None, R=None, Q_jump=None, *, tol=1e-13,
 
     X1_init = Q_jump
     X1, change, iters, ok = jax.lax.while_loop(
-        cond, body, (X1_init, jnp.asarray(jnp.inf), jnp.asarray(0), jnp.asarray(True)))
+        cond, body, (X1_init, jnp.asarray(jnp.inf), jnp.asarray(0), jnp.asarray(True))
+    )
     sol = sweep(X1, diffrax.SaveAt(ts=system.s[::-1]))
     assert sol.ys is not None  # saved at `ts`
     X = jax.vmap(_sym)(sol.ys[::-1, r:].reshape(-1, r, r))
-    code = RESULTS.where(ok & (change <= tol), RESULTS.successful,
-                         RESULTS.where(ok, RESULTS.not_converged, RESULTS.nonfinite))
+    code = RESULTS.where(
+        ok & (change <= tol),
+        RESULTS.successful,
+        RESULTS.where(ok, RESULTS.not_converged, RESULTS.nonfinite),
+    )
     code = RESULTS.where(sol.result == diffrax.RESULTS.successful, code, RESULTS.nonfinite)
     nan = jnp.full((r,), jnp.nan + 0j)
     return RiccatiSolution(system.s, X, _gains(system, X, R), iters, change, nan, code)
@@ -141,8 +164,9 @@ def _orbit_rate(model, tp, delta, s, w):
     return phase_field(model, tp, delta, s, w, jnp.zeros(num_inputs(model), w.dtype))[0]
 
 
-def riccati_hamiltonian(model, system, Q=None, R=None, Q_jump=None, *, rtol=1e-12,
-                        atol=1e-12, max_steps=8192):
+def riccati_hamiltonian(
+    model, system, Q=None, R=None, Q_jump=None, *, rtol=1e-12, atol=1e-12, max_steps=8192
+):
     """Periodic $X(s)$ from the stable invariant subspace of the Hamiltonian monodromy.
 
     Arguments as `riccati_backward` (no iteration). The jump matrix $J$ must be
@@ -165,9 +189,17 @@ def riccati_hamiltonian(model, system, Q=None, R=None, Q_jump=None, *, rtol=1e-1
 
     y0 = jnp.concatenate([system.w[0], jnp.eye(2 * r).reshape(-1)])
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(field), diffrax.Tsit5(), t0=0.0, t1=1.0, dt0=None, y0=y0,
+        diffrax.ODETerm(field),
+        diffrax.Tsit5(),
+        t0=0.0,
+        t1=1.0,
+        dt0=None,
+        y0=y0,
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-        saveat=diffrax.SaveAt(ts=system.s), max_steps=max_steps, throw=False)
+        saveat=diffrax.SaveAt(ts=system.s),
+        max_steps=max_steps,
+        throw=False,
+    )
     assert sol.ys is not None  # saved at `ts`
     Z = sol.ys[:, r:].reshape(-1, 2 * r, 2 * r)
     JinvT = jnp.linalg.inv(system.J).T
@@ -180,15 +212,18 @@ def riccati_hamiltonian(model, system, Q=None, R=None, Q_jump=None, *, rtol=1e-1
     X0 = _sym(X0)
 
     def at(Zs):
-        return _sym(jnp.linalg.solve((Zs[:r, :r] + Zs[:r, r:] @ X0).T,
-                                     (Zs[r:, :r] + Zs[r:, r:] @ X0).T).T)
+        return _sym(
+            jnp.linalg.solve((Zs[:r, :r] + Zs[:r, r:] @ X0).T, (Zs[r:, :r] + Zs[r:, r:] @ X0).T).T
+        )
 
     X = jax.vmap(at)(Z)
     residual = jnp.max(jnp.abs(X[-1] - system.J.T @ X0 @ system.J - Q_jump))
     stable = ev[idx]
     stable = stable[jnp.argsort(-jnp.abs(stable))]
     finite = jnp.all(jnp.isfinite(X))
-    code = RESULTS.where((sol.result == diffrax.RESULTS.successful) & finite,
-                         RESULTS.successful, RESULTS.nonfinite)
-    return RiccatiSolution(system.s, X, _gains(system, X, R), jnp.asarray(0), residual,
-                           stable, code)
+    code = RESULTS.where(
+        (sol.result == diffrax.RESULTS.successful) & finite, RESULTS.successful, RESULTS.nonfinite
+    )
+    return RiccatiSolution(
+        system.s, X, _gains(system, X, R), jnp.asarray(0), residual, stable, code
+    )

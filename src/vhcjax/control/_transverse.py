@@ -38,8 +38,12 @@ def phase_matrices(model, theta_plus, delta, s, w):
     """$(A, B, dt/ds)$ at phase `s` on the orbit point `w` ($A$, $B$ per unit time)."""
     m = num_inputs(model)
     u0 = jnp.zeros(m, w.dtype)
-    (dA, dB), c = jax.jacfwd(lambda ww, uu: phase_field(model, theta_plus, delta, s, ww, uu)[0],
-                             argnums=(0, 1))(w, u0), phase_field(model, theta_plus, delta, s, w, u0)[1]
+    (dA, dB), c = (
+        jax.jacfwd(
+            lambda ww, uu: phase_field(model, theta_plus, delta, s, ww, uu)[0], argnums=(0, 1)
+        )(w, u0),
+        phase_field(model, theta_plus, delta, s, w, u0)[1],
+    )
     return dA / c, dB / c, c
 
 
@@ -108,9 +112,14 @@ class TransverseSystem(eqx.Module):
 
 def _solve_code(sol):
     return RESULTS.where(
-        sol.result == diffrax.RESULTS.successful, RESULTS.successful,
-        RESULTS.where(sol.result == diffrax.RESULTS.max_steps_reached,
-                      RESULTS.max_steps_reached, RESULTS.nonfinite))
+        sol.result == diffrax.RESULTS.successful,
+        RESULTS.successful,
+        RESULTS.where(
+            sol.result == diffrax.RESULTS.max_steps_reached,
+            RESULTS.max_steps_reached,
+            RESULTS.nonfinite,
+        ),
+    )
 
 
 def transverse_system(model, x_plus, *, num_points=401):
@@ -143,7 +152,7 @@ def transverse_system(model, x_plus, *, num_points=401):
         w = y[:r]
         dw, c = phase_field(model, theta_plus, delta, ss, w, u0)
         A, _, _ = phase_matrices(model, theta_plus, delta, ss, w)
-        Phi = y[r + 1:].reshape(r, r)
+        Phi = y[r + 1 :].reshape(r, r)
         return jnp.concatenate([dw, c[None], (c * A @ Phi).reshape(-1)])
 
     y0 = jnp.concatenate([x_plus[1:], jnp.zeros(1, x_plus.dtype), jnp.eye(r).reshape(-1)])
@@ -152,15 +161,23 @@ def transverse_system(model, x_plus, *, num_points=401):
     # error, differentiated by the feedback along the orbit, would show in the closed-loop
     # Poincare map).
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(field), diffrax.Tsit5(), t0=0.0, t1=1.0, dt0=1.0 / (num_points - 1),
-        y0=y0, stepsize_controller=diffrax.ConstantStepSize(),
-        saveat=diffrax.SaveAt(ts=s), max_steps=num_points + 8, throw=False)
+        diffrax.ODETerm(field),
+        diffrax.Tsit5(),
+        t0=0.0,
+        t1=1.0,
+        dt0=1.0 / (num_points - 1),
+        y0=y0,
+        stepsize_controller=diffrax.ConstantStepSize(),
+        saveat=diffrax.SaveAt(ts=s),
+        max_steps=num_points + 8,
+        throw=False,
+    )
     ys = sol.ys
     assert ys is not None  # saved at `ts`
     w = ys[:, :r]
     A, B, c = jax.vmap(lambda ss, ww: phase_matrices(model, theta_plus, delta, ss, ww))(s, w)
     dw = jax.vmap(lambda ss, ww: phase_field(model, theta_plus, delta, ss, ww, u0)[0])(s, w)
-    Phi = ys[-1, r + 1:].reshape(r, r)
+    Phi = ys[-1, r + 1 :].reshape(r, r)
     x_minus = jnp.concatenate([theta_minus[None], w[-1]])
     J, xp = jump_matrix(model, x_minus)
     closure = jnp.max(jnp.abs(xp - x_plus))
@@ -169,5 +186,21 @@ def transverse_system(model, x_plus, *, num_points=401):
     code = _solve_code(sol)
     finite = jnp.all(jnp.isfinite(J)) & jnp.all(jnp.isfinite(Phi)) & jnp.all(jnp.isfinite(A))
     code = RESULTS.where((code == RESULTS.successful) & ~finite, RESULTS.nonfinite, code)
-    return TransverseSystem(s, theta_plus, theta_minus, w, dw, A, B, c, ys[-1, r], J, Phi,
-                            ev, x_plus, x_minus, closure, code)
+    return TransverseSystem(
+        s,
+        theta_plus,
+        theta_minus,
+        w,
+        dw,
+        A,
+        B,
+        c,
+        ys[-1, r],
+        J,
+        Phi,
+        ev,
+        x_plus,
+        x_minus,
+        closure,
+        code,
+    )

@@ -2,15 +2,45 @@
 continuation and slope sweeps; the reduced dynamics of a virtual holonomic constraint.
 """
 
+from ._continuation import (
+    continue_to_model as continue_to_model,
+)
+from ._dispatch import (
+    reference_guess as reference_guess,
+    reference_model as reference_model,
+)
+from ._find import (
+    find_gait as find_gait,
+    find_gaits as find_gaits,
+)
 from ._gait import (
     FAMILIES as FAMILIES,
-    family_sign as family_sign,
-    Gait as Gait,
     METHODS as METHODS,
     SUCCESS_TOL as SUCCESS_TOL,
     VHC_CONFIG as VHC_CONFIG,
+    Gait as Gait,
+    family_sign as family_sign,
 )
-
+from ._problem1 import (
+    BoundaryData as BoundaryData,
+    impact_configuration as impact_configuration,
+    impact_velocity_matrix as impact_velocity_matrix,
+    quadratic_coefficients as quadratic_coefficients,
+    solve_for_d as solve_for_d,
+    velocity_relations as velocity_relations,
+    vhc_boundary as vhc_boundary,
+    vhc_residual as vhc_residual,
+    vhc_search as vhc_search,
+)
+from ._shooting import (
+    complete_guess as complete_guess,
+    complete_guess_jit as complete_guess_jit,
+    shooting_search as shooting_search,
+)
+from ._sweep import (
+    Sweep as Sweep,
+    sweep as sweep,
+)
 from ._vhc import (
     constraint as constraint,
     integral_I as integral_I,
@@ -23,47 +53,9 @@ from ._vhc import (
     theta_dot_squared as theta_dot_squared,
     theta_dynamics_coefficients as theta_dynamics_coefficients,
 )
-
-from ._problem1 import (
-    BoundaryData as BoundaryData,
-    impact_configuration as impact_configuration,
-    impact_velocity_matrix as impact_velocity_matrix,
-    quadratic_coefficients as quadratic_coefficients,
-    solve_for_d as solve_for_d,
-    velocity_relations as velocity_relations,
-    vhc_boundary as vhc_boundary,
-    vhc_residual as vhc_residual,
-    vhc_search as vhc_search,
-)
-
-from ._shooting import (
-    complete_guess as complete_guess,
-    complete_guess_jit as complete_guess_jit,
-    shooting_search as shooting_search,
-)
-
-from ._dispatch import (
-    reference_guess as reference_guess,
-    reference_model as reference_model,
-)
-
-from ._continuation import (
-    continue_to_model as continue_to_model,
-)
-
-from ._find import (
-    find_gait as find_gait,
-    find_gaits as find_gaits,
-)
-
-from ._sweep import (
-    Sweep as Sweep,
-    sweep as sweep,
-)
-
 from ._vhc_n import (
-    vhc_gait_search as vhc_gait_search,
-    vhc_orbit as vhc_orbit,
     VHCGait as VHCGait,
     VHCOrbit as VHCOrbit,
+    vhc_gait_search as vhc_gait_search,
+    vhc_orbit as vhc_orbit,
 )

@@ -1,23 +1,16 @@
 """Continuation: homotopy in the model parameters from a known gait, with a tangent
 predictor (implicit differentiation of the residual)."""
 
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 
 from .._batching import bucket_size
 from .._results import RESULTS
-from ._dispatch import _check
-from ._dispatch import _relabel
-from ._dispatch import _search
-from ._dispatch import reference_guess
-from ._dispatch import reference_model
+from ._dispatch import _check, _relabel, _search, reference_guess, reference_model
 from ._gait import family_sign
 from ._problem1 import vhc_residual
-from ._shooting import _shoot_eval
-from ._shooting import complete_guess_jit
-
+from ._shooting import _shoot_eval, complete_guess_jit
 
 # ---------------------------------------------------------------------------------------
 # Continuation (homotopy in the parameters; sweeps in the slope)
@@ -88,8 +81,11 @@ def _continue(start, end, s_buf, n, z0, sign, method):
         buf = jax.tree_util.tree_map(lambda b, v: b.at[i].set(v), buf, gait)
         tbuf = tbuf.at[i].set(jnp.where(ok, t_new, 0.0))
         return (
-            jnp.where(ok, s, s_good), jnp.where(ok, z_new, z_good),
-            jnp.where(ok_t, t_new, t_good), buf, tbuf,
+            jnp.where(ok, s, s_good),
+            jnp.where(ok, z_new, z_good),
+            jnp.where(ok_t, t_new, t_good),
+            buf,
+            tbuf,
         )
 
     init = (s0, z0, t0, buf, tbuf)
@@ -108,7 +104,9 @@ def _run_continuation(start, end, s_values, z0, sign, method):
     n = len(s_values)
     s_buf = np.concatenate([s_values, np.full(bucket_size(n, 16) - n, s_values[-1])])
     # `n` traced: every length up to the buffer size shares one compilation.
-    gaits, tangents = _continue_jit(start, end, jnp.asarray(s_buf), jnp.asarray(n), z0, sign, method)
+    gaits, tangents = _continue_jit(
+        start, end, jnp.asarray(s_buf), jnp.asarray(n), z0, sign, method
+    )
     return jax.tree_util.tree_map(lambda x: x[:n], gaits), tangents[:n]
 
 
@@ -133,8 +131,16 @@ def _homotopy_steps(start, end):
     import numpy as np
 
     spread = max(
-        float(np.max(np.abs(np.log(np.asarray(getattr(end, name), float)
-                                    / np.asarray(getattr(start, name), float)))))
+        float(
+            np.max(
+                np.abs(
+                    np.log(
+                        np.asarray(getattr(end, name), float)
+                        / np.asarray(getattr(start, name), float)
+                    )
+                )
+            )
+        )
         for name in _HOMOTOPY_LEAVES
     )
     return max(_HOMOTOPY_STEPS, int(np.ceil(spread / np.log1p(_HOMOTOPY_RATIO))) + 1)

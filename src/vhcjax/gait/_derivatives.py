@@ -13,6 +13,7 @@ import dataclasses
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax.core import Tracer
 
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, step_unchecked
@@ -25,8 +26,15 @@ _FIELDS = ("x_plus", "x_minus", "T", "E0", "step_length", "speed", "energy_loss"
 
 def _outputs(model, x_plus, x_minus, T, E0):
     L, v, loss = _derived(model, x_plus, x_minus, T)
-    return {"x_plus": x_plus, "x_minus": x_minus, "T": T, "E0": E0, "step_length": L,
-            "speed": v, "energy_loss": loss}
+    return {
+        "x_plus": x_plus,
+        "x_minus": x_minus,
+        "T": T,
+        "E0": E0,
+        "step_length": L,
+        "speed": v,
+        "energy_loss": loss,
+    }
 
 
 def _vhc_fn(z, model, sign):
@@ -58,13 +66,14 @@ def _attach_one(model, gait, method, sign):
     _, out = implicit_outputs(fn, _unknowns(model, gait, method), model, values, ok, (sign,))
     n = model.n_dof
     xp, xm = out["x_plus"], out["x_minus"]
-    fields = dict(out, a=xp[0], b=xp[n], e=xp[1], f=xp[n + 1], c=xm[0], d=xm[n], g=xm[1],
-                  h=xm[n + 1])
+    fields = dict(
+        out, a=xp[0], b=xp[n], e=xp[1], f=xp[n + 1], c=xm[0], d=xm[n], g=xm[1], h=xm[n + 1]
+    )
     return dataclasses.replace(gait, **fields)
 
 
 def _traced(tree):
-    return any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(tree))
+    return any(isinstance(x, Tracer) for x in jax.tree_util.tree_leaves(tree))
 
 
 def with_derivatives(model, gait, method, sign):
@@ -84,7 +93,13 @@ def with_derivatives(model, gait, method, sign):
     )
     B = jnp.shape(gait.a)[0]
     model = jax.tree_util.tree_map(
-        lambda x: jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:]) if (eqx.is_array(x) and jnp.ndim(x) > 0) else x,
+        lambda x: (
+            jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])
+            if (eqx.is_array(x) and jnp.ndim(x) > 0)
+            else x
+        ),
         model,
     )
-    return eqx.filter_vmap(lambda m, g: _attach_one(m, g, method, sign), in_axes=(axes, 0))(model, gait)
+    return eqx.filter_vmap(lambda m, g: _attach_one(m, g, method, sign), in_axes=(axes, 0))(
+        model, gait
+    )

@@ -1,12 +1,8 @@
 """One search by method name, and the reference gait that seeds continuation."""
 
-
 import jax.numpy as jnp
 
-from ._gait import FAMILIES
-from ._gait import METHODS
-from ._gait import _REFERENCE_AB
-from ._gait import _REFERENCE_PSI
+from ._gait import _REFERENCE_AB, _REFERENCE_PSI, FAMILIES, METHODS
 from ._problem1 import vhc_search
 from ._shooting import shooting_search
 
@@ -16,12 +12,14 @@ def _search(model, guess, sign, method, solver="newton", chord=False, axes=None)
         return vhc_search(model, guess, sign, solver=solver, chord=chord, axes=axes)
     if method == "shooting":
         return shooting_search(
-            model, guess, sign, solver="optimistix" if solver == "optimistix" else "newton",
-            chord=chord, axes=axes,
+            model,
+            guess,
+            sign,
+            solver="optimistix" if solver == "optimistix" else "newton",
+            chord=chord,
+            axes=axes,
         )
     raise ValueError(f"method must be one of {METHODS}, got {method!r}")
-
-
 
 
 def _relabel(gait, family):

@@ -1,6 +1,5 @@
 """`find_gait` and `find_gaits`: the gait search as users call it, one gait or a batch."""
 
-
 import warnings
 
 import equinox as eqx
@@ -9,18 +8,12 @@ import jax.numpy as jnp
 
 from .._batching import bucket_size, device_multiple, host_workers, in_chunks, shard_batch
 from .._results import RESULTS
-from ._continuation import _HOMOTOPY_STEPS
-from ._continuation import _continue
-from ._continuation import _seed
-from ._continuation import continue_to_model
-from ._dispatch import _check
-from ._dispatch import _relabel
-from ._dispatch import _search
-from ._dispatch import reference_model
+from ..solvers import detach
+from ._continuation import _HOMOTOPY_STEPS, _continue, _seed, continue_to_model
+from ._derivatives import with_derivatives
+from ._dispatch import _check, _relabel, _search, reference_model
 from ._gait import family_sign
 from ._problem1 import _with_psi
-from ._derivatives import with_derivatives
-from ..solvers import detach
 
 
 def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newton", throw=True):
@@ -125,8 +118,18 @@ def _from_reference_batch(model, sign, method, num, axes):
     return eqx.filter_vmap(lambda m: _from_reference(m, sign, method, num), in_axes=(axes,))(model)
 
 
-def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, solver="newton",
-               mesh=None, chord=None, vectorise=None):
+def find_gaits(
+    model,
+    guesses=None,
+    family="stable",
+    method="vhc",
+    *,
+    psi=None,
+    solver="newton",
+    mesh=None,
+    chord=None,
+    vectorise=None,
+):
     """Batched `find_gait` over guesses, slopes and model parameters; never raises.
 
     **Arguments:**
@@ -158,7 +161,8 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
     if vectorise is not None:
         warnings.warn(
             "find_gaits(vectorise=...) is ignored: every batch is one vectorised Newton loop",
-            DeprecationWarning, stacklevel=2,
+            DeprecationWarning,
+            stacklevel=2,
         )
     if psi is not None:
         model = _with_psi(model, jnp.asarray(psi, dtype=float))
@@ -171,7 +175,8 @@ def find_gaits(model, guesses=None, family="stable", method="vhc", *, psi=None, 
 
 def _find_gaits(model, guesses, family, method, solver, mesh, chord):
     sizes = [
-        jnp.shape(x)[0] for x in jax.tree_util.tree_leaves(model)
+        jnp.shape(x)[0]
+        for x in jax.tree_util.tree_leaves(model)
         if eqx.is_array(x) and jnp.ndim(x) > 0
     ]
     if guesses is not None:
@@ -186,8 +191,9 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord):
         chord = _padded_size(min(B, chunk), mesh) // device_multiple(mesh) >= _CHORD_MIN_MEMBERS
     sign = family_sign(family)
     if B <= chunk:
-        gaits = _find_chunk(model, guesses, B, _padded_size(B, mesh), sign, method, solver,
-                            mesh, chord)
+        gaits = _find_chunk(
+            model, guesses, B, _padded_size(B, mesh), sign, method, solver, mesh, chord
+        )
         return _clean_failed(_relabel(gaits, family), guesses, B)
 
     def part(x, i, j):
@@ -199,9 +205,17 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord):
         lambda i, j: _find_chunk(
             jax.tree_util.tree_map(lambda x: part(x, i, j), model),
             None if guesses is None else part(guesses, i, j),
-            j - i, chunk, sign, method, solver, mesh, chord,
+            j - i,
+            chunk,
+            sign,
+            method,
+            solver,
+            mesh,
+            chord,
         ),
-        B, chunk, workers,
+        B,
+        chunk,
+        workers,
     )
     return _clean_failed(_relabel(gaits, family), guesses, B)
 
@@ -211,8 +225,11 @@ def _clean_failed(gaits, guesses, B=None):
     their numbers are placeholders (0 where not finite), the code says why. `B`: batch
     size (`None`: one gait, `guesses` one guess)."""
     if guesses is not None and B is None:
-        gaits = eqx.tree_at(lambda g: g.result, gaits, RESULTS.where(
-            jnp.all(jnp.isfinite(guesses)), gaits.result, RESULTS.bad_input))
+        gaits = eqx.tree_at(
+            lambda g: g.result,
+            gaits,
+            RESULTS.where(jnp.all(jnp.isfinite(guesses)), gaits.result, RESULTS.bad_input),
+        )
     elif guesses is not None:
         finite = jnp.broadcast_to(jnp.all(jnp.isfinite(guesses), axis=1), (B,))
         code = jax.vmap(lambda f, r: RESULTS.where(f, r, RESULTS.bad_input))(finite, gaits.result)

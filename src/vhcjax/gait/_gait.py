@@ -9,7 +9,6 @@ import jax.numpy as jnp
 from .._results import RESULTS
 from ..hybrid import SolverConfig
 
-
 FAMILIES = ("stable", "unstable")
 METHODS = ("vhc", "shooting")
 
@@ -101,8 +100,9 @@ def _derived(model, x_plus, x_minus, T):
     return step_length, speed, ke(x_minus) - ke(x_plus)
 
 
-def _make_gait(model, x_plus, x_minus, T, E0, iterations, residual, code, family, method,
-               physical=None):
+def _make_gait(
+    model, x_plus, x_minus, T, E0, iterations, residual, code, family, method, physical=None
+):
     """The `Gait`; `physical`: whether the impact at `x_minus` pushes the foot away from the
     ground (`None`: computed here)."""
     n = model.n_dof
@@ -111,18 +111,30 @@ def _make_gait(model, x_plus, x_minus, T, E0, iterations, residual, code, family
         _, _, physical = model.impact(x_minus)
     # A periodic solution walking uphill in negative time (thesis 7.17-7.18).
     uphill = (x_plus[n] > 0) | (T < 0)
-    code = RESULTS.where(
-        (code == RESULTS.successful) & uphill, RESULTS.infeasible_uphill, code
-    )
+    code = RESULTS.where((code == RESULTS.successful) & uphill, RESULTS.infeasible_uphill, code)
     code = RESULTS.where((code == RESULTS.successful) & ~physical, RESULTS.bad_impact, code)
     code = RESULTS.where(model.validate(), code, RESULTS.bad_input)
     return Gait(
-        a=x_plus[0], b=x_plus[n], c=x_minus[0], d=x_minus[n],
-        e=x_plus[1], f=x_plus[n + 1], g=x_minus[1], h=x_minus[n + 1],
-        T=T, E0=E0, x_plus=x_plus, x_minus=x_minus,
-        step_length=step_length, speed=speed, energy_loss=loss,
-        iterations=jnp.asarray(iterations), residual=residual, result=code,
-        family=family, method=method,
+        a=x_plus[0],
+        b=x_plus[n],
+        c=x_minus[0],
+        d=x_minus[n],
+        e=x_plus[1],
+        f=x_plus[n + 1],
+        g=x_minus[1],
+        h=x_minus[n + 1],
+        T=T,
+        E0=E0,
+        x_plus=x_plus,
+        x_minus=x_minus,
+        step_length=step_length,
+        speed=speed,
+        energy_loss=loss,
+        iterations=jnp.asarray(iterations),
+        residual=residual,
+        result=code,
+        family=family,
+        method=method,
     )
 
 

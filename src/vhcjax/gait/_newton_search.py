@@ -1,11 +1,9 @@
 """Newton searches of a gait: one member (`damped_newton`) or a batch in one loop
 (`damped_newton_batch`), with the same residual and finish written for one member."""
 
-
 import equinox as eqx
 
-from ..solvers import damped_newton
-from ..solvers import damped_newton_batch
+from ..solvers import damped_newton, damped_newton_batch
 from ._gait import _CHORD_BELOW
 
 
@@ -16,13 +14,13 @@ def _evaluate_batch(evaluate, config, axes, model, X, T, family):
     return eqx.filter_vmap(member, in_axes=(axes, 0, 0))(model, X, T)
 
 
-def _newton_search(evaluate, config, family, finish, model, x0, axes, chord,
-                   **newton):
+def _newton_search(evaluate, config, family, finish, model, x0, axes, chord, **newton):
     """`damped_newton` on one member (`axes=None`) or `damped_newton_batch` on a batch
     (`model` batched along `axes`, `x0`: `(B, n)`) of `evaluate(model, x, family, config, tol)`;
     `finish(model, x, r, aux, iterations) -> Gait` is written for one member."""
     newton["chord_below"] = _CHORD_BELOW if chord else None
     if axes is None:
+
         def member(x, tol):
             return evaluate(model, x, family, config, tol)
 
@@ -35,4 +33,6 @@ def _newton_search(evaluate, config, family, finish, model, x0, axes, chord,
 
 def _each_member(search, model, guess, axes, family, **kwargs):
     """`search` on every member of a batch by `vmap` (the solvers without a batch loop)."""
-    return eqx.filter_vmap(lambda m, g: search(m, g, family, **kwargs), in_axes=(axes, 0))(model, guess)
+    return eqx.filter_vmap(lambda m, g: search(m, g, family, **kwargs), in_axes=(axes, 0))(
+        model, guess
+    )

@@ -29,19 +29,18 @@ import jax.numpy as jnp
 import optimistix as optx
 
 from .._results import RESULTS
-from ..solvers import levenberg_marquardt
-from ..solvers import optax_minimise
-from ._gait import SUCCESS_TOL
-from ._gait import VHC_CONFIG
-from ._gait import _LOOSE_TOL
-from ._gait import _RESIDUAL_CAP
-from ._gait import _label
-from ._gait import _make_gait
-from ._gait import family_sign
-from ._newton_search import _each_member
-from ._newton_search import _newton_search
-from ._vhc import phi_second_derivative
-from ._vhc import singularity_terms
+from ..solvers import levenberg_marquardt, optax_minimise
+from ._gait import (
+    _LOOSE_TOL,
+    _RESIDUAL_CAP,
+    SUCCESS_TOL,
+    VHC_CONFIG,
+    _label,
+    _make_gait,
+    family_sign,
+)
+from ._newton_search import _each_member, _newton_search
+from ._vhc import phi_second_derivative, singularity_terms
 
 
 # ---------------------------------------------------------------------------------------
@@ -237,7 +236,9 @@ def _boundary_abd(model, data, a, b, d, real, config):
         # A member already singular at the start gets an empty interval (a few steps).
         args=(a, jnp.where(regular_start & real, c - a, 0.0), (model, E0, sign)),
         stepsize_controller=diffrax.PIDController(
-            rtol=config.rtol, atol=config.atol, norm=_phi_error_norm,
+            rtol=config.rtol,
+            atol=config.atol,
+            norm=_phi_error_norm,
             dtmin=_PHI_DTMIN,
         ),
         saveat=diffrax.SaveAt(t1=True),
@@ -265,7 +266,9 @@ def _boundary_abd(model, data, a, b, d, real, config):
         | (jnp.abs(det_c) < 1e-12)
     )
     code = RESULTS.where(
-        ~real, RESULTS.no_real_root, RESULTS.where(singular, RESULTS.singular_phi_ode, RESULTS.successful)
+        ~real,
+        RESULTS.no_real_root,
+        RESULTS.where(singular, RESULTS.singular_phi_ode, RESULTS.successful),
     )
     ok = code == RESULTS.successful
     residual = jnp.where(ok, residual, jnp.zeros_like(residual))
@@ -300,8 +303,17 @@ def _finish_vhc(model, bd, iterations, solver_ok, family, config=VHC_CONFIG):
 
 
 def vhc_search(
-    model, guess, family="stable", *, solver="newton", rtol=1e-11, atol=1e-11,
-    max_steps=50, config=VHC_CONFIG, chord=False, axes=None,
+    model,
+    guess,
+    family="stable",
+    *,
+    solver="newton",
+    rtol=1e-11,
+    atol=1e-11,
+    max_steps=50,
+    config=VHC_CONFIG,
+    chord=False,
+    axes=None,
 ):
     """Solve thesis Problem 1 for $(a, b)$ from `guess` (pure; never raises).
 
@@ -327,19 +339,33 @@ def vhc_search(
     **Returns:** a `Gait` (with a leading batch axis with `axes`).
     """
     if axes is not None and solver != "newton":
-        return _each_member(vhc_search, model, guess, axes, family, solver=solver, rtol=rtol,
-                            atol=atol, max_steps=max_steps, config=config)
+        return _each_member(
+            vhc_search,
+            model,
+            guess,
+            axes,
+            family,
+            solver=solver,
+            rtol=rtol,
+            atol=atol,
+            max_steps=max_steps,
+            config=config,
+        )
     ab0 = jnp.asarray(guess, dtype=float)[..., :2]
     res_fn = lambda ab: vhc_residual(model, ab, family, config)  # noqa: E731
     if solver == "newton":
-        return _vhc_newton(model, ab0, family, config, chord, axes, rtol=rtol, atol=atol,
-                           max_steps=max_steps)
+        return _vhc_newton(
+            model, ab0, family, config, chord, axes, rtol=rtol, atol=atol, max_steps=max_steps
+        )
     if solver == "lm":
         ab, iters = levenberg_marquardt(res_fn, ab0, rtol, atol, 4 * max_steps)
     elif solver == "optimistix":
         sol = optx.root_find(
             lambda ab, _: res_fn(ab),
-            optx.Newton(rtol=rtol, atol=atol), ab0, max_steps=max_steps, throw=False,
+            optx.Newton(rtol=rtol, atol=atol),
+            ab0,
+            max_steps=max_steps,
+            throw=False,
         )
         ab, iters = sol.value, sol.stats["num_steps"]
     elif solver == "optax":
@@ -352,12 +378,30 @@ def vhc_search(
     return _finish_vhc(model, bd, iters, finite, family, config)
 
 
-def _vhc_newton(model, ab0, family, config=VHC_CONFIG, chord=False, axes=None, rtol=1e-11,
-                atol=1e-11, max_steps=50):
+def _vhc_newton(
+    model,
+    ab0,
+    family,
+    config=VHC_CONFIG,
+    chord=False,
+    axes=None,
+    rtol=1e-11,
+    atol=1e-11,
+    max_steps=50,
+):
     """`vhc_search` with `solver="newton"`."""
     return _newton_search(
-        _vhc_eval, config, family,
+        _vhc_eval,
+        config,
+        family,
         lambda m, ab, r, bd, k: _finish_vhc(m, bd, k, jnp.isfinite(ab).all(), family, config),
-        model, ab0, axes, chord, rtol=rtol, atol=atol, max_steps=max_steps,
-        tolerances=(_LOOSE_TOL, config.rtol), residual_cap=_RESIDUAL_CAP,
+        model,
+        ab0,
+        axes,
+        chord,
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+        tolerances=(_LOOSE_TOL, config.rtol),
+        residual_cap=_RESIDUAL_CAP,
     )

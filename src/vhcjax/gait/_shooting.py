@@ -1,27 +1,15 @@
 """Shooting (thesis Problem 2): Newton on the step-to-step map of the hybrid simulation
 on the post-impact section."""
 
-
 import equinox as eqx
 import jax.numpy as jnp
 
 from .. import hybrid as _poincare
 from .._results import RESULTS
-from ..hybrid import DEFAULT_CONFIG
-from ..hybrid import step_unchecked
-from ._gait import SUCCESS_TOL
-from ._gait import _LOOSE_TOL
-from ._gait import _RESIDUAL_CAP
-from ._gait import _label
-from ._gait import _make_gait
-from ._gait import family_sign
-from ._newton_search import _each_member
-from ._newton_search import _newton_search
-from ._problem1 import _impact_data
-from ._problem1 import _quadratic
-from ._problem1 import _with_tolerance
-from ._problem1 import solve_for_d
-from ._problem1 import velocity_relations
+from ..hybrid import DEFAULT_CONFIG, step_unchecked
+from ._gait import _LOOSE_TOL, _RESIDUAL_CAP, SUCCESS_TOL, _label, _make_gait, family_sign
+from ._newton_search import _each_member, _newton_search
+from ._problem1 import _impact_data, _quadratic, _with_tolerance, solve_for_d, velocity_relations
 
 
 # ---------------------------------------------------------------------------------------
@@ -53,8 +41,17 @@ def _shoot_member(model, z, family, config, tol):
 
 
 def shooting_search(
-    model, guess, family="stable", *, solver="newton", rtol=1e-12, atol=1e-12, max_steps=40,
-    config=DEFAULT_CONFIG, chord=False, axes=None,
+    model,
+    guess,
+    family="stable",
+    *,
+    solver="newton",
+    rtol=1e-12,
+    atol=1e-12,
+    max_steps=40,
+    config=DEFAULT_CONFIG,
+    chord=False,
+    axes=None,
 ):
     """Solve Problem 2, $P(z) = z$ for the step-to-step map $P$ on the post-impact section
     (`vhcjax.hybrid.step_map`), from `guess` (pure; never raises).
@@ -71,20 +68,40 @@ def shooting_search(
     """
     guess = jnp.asarray(guess, dtype=float)
     if axes is not None and solver != "newton":
-        return _each_member(shooting_search, model, guess, axes, family, solver=solver,
-                            rtol=rtol, atol=atol, max_steps=max_steps, config=config)
+        return _each_member(
+            shooting_search,
+            model,
+            guess,
+            axes,
+            family,
+            solver=solver,
+            rtol=rtol,
+            atol=atol,
+            max_steps=max_steps,
+            config=config,
+        )
     z0 = _section_points(model, guess, family, axes)
     if solver == "newton":
-        return _shooting_newton(model, z0, family, config, chord, axes, rtol=rtol, atol=atol,
-                                max_steps=max_steps)
+        return _shooting_newton(
+            model, z0, family, config, chord, axes, rtol=rtol, atol=atol, max_steps=max_steps
+        )
     if solver != "optimistix":
         raise ValueError(f"solver must be 'newton' or 'optimistix' for shooting, got {solver!r}")
     fp = _poincare.fixed_point(
         model, z0, 1, rtol=rtol, atol=atol, max_steps=max_steps, config=config
     )
     sr = step_unchecked(model, fp.x0, config)
-    return _shooting_gait(model, fp.x0, sr.x_minus, fp.periods[0], fp.iterations, fp.residual,
-                          fp.result, family, sr.result != RESULTS.bad_impact)
+    return _shooting_gait(
+        model,
+        fp.x0,
+        sr.x_minus,
+        fp.periods[0],
+        fp.iterations,
+        fp.residual,
+        fp.result,
+        family,
+        sr.result != RESULTS.bad_impact,
+    )
 
 
 def _section_points(model, guess, family, axes=None):
@@ -98,9 +115,19 @@ def _section_points(model, guess, family, axes=None):
     return eqx.filter_vmap(complete, in_axes=(axes, 0))(model, guess)
 
 
-def _shooting_newton(model, z0, family, config=DEFAULT_CONFIG, chord=False, axes=None,
-                     rtol=1e-12, atol=1e-12, max_steps=40):
+def _shooting_newton(
+    model,
+    z0,
+    family,
+    config=DEFAULT_CONFIG,
+    chord=False,
+    axes=None,
+    rtol=1e-12,
+    atol=1e-12,
+    max_steps=40,
+):
     """`shooting_search` with `solver="newton"` from section points `z0`."""
+
     def finish(model, z, r, sr, iters):
         res = jnp.max(jnp.abs(r))
         ok = (sr.result == RESULTS.successful) & jnp.isfinite(z).all()
@@ -109,12 +136,31 @@ def _shooting_newton(model, z0, family, config=DEFAULT_CONFIG, chord=False, axes
             sr.result,
             RESULTS.where(ok & (res < SUCCESS_TOL), RESULTS.successful, RESULTS.not_converged),
         )
-        return _shooting_gait(model, model.section_to_state(z), sr.x_minus, sr.period,
-                              iters, res, code, family, sr.result != RESULTS.bad_impact)
+        return _shooting_gait(
+            model,
+            model.section_to_state(z),
+            sr.x_minus,
+            sr.period,
+            iters,
+            res,
+            code,
+            family,
+            sr.result != RESULTS.bad_impact,
+        )
 
     return _newton_search(
-        _shoot_member, config, family, finish, model, z0, axes, chord, rtol=rtol,
-        atol=atol, max_steps=max_steps, tolerances=(_LOOSE_TOL, config.rtol),
+        _shoot_member,
+        config,
+        family,
+        finish,
+        model,
+        z0,
+        axes,
+        chord,
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+        tolerances=(_LOOSE_TOL, config.rtol),
         residual_cap=_RESIDUAL_CAP,
     )
 

@@ -15,8 +15,7 @@ import jax.numpy as jnp
 from .._batching import bucket_size, host_workers, in_chunks
 from .._results import RESULTS
 from ._continuation import _run_continuation, _tangent, _unknowns, continue_to_model
-from ._dispatch import _check
-from ._dispatch import _relabel
+from ._dispatch import _check, _relabel
 from ._find import find_gaits
 from ._gait import _REFERENCE_PSI, Gait, family_sign
 from ._problem1 import _with_psi
@@ -58,7 +57,9 @@ class Sweep(eqx.Module):
         for i in range(len(ok)):
             if ok[i]:
                 continue
-            prev = i - 1 if i > 0 and ok[i - 1] else (i + 1 if i + 1 < len(ok) and ok[i + 1] else None)
+            prev = (
+                i - 1 if i > 0 and ok[i - 1] else (i + 1 if i + 1 < len(ok) and ok[i + 1] else None)
+            )
             if prev is None:
                 continue
             reason = {
@@ -69,8 +70,12 @@ class Sweep(eqx.Module):
             if names[i] == "not_converged" and tan is not None and tan[prev] > _FOLD_TANGENT:
                 reason = f"fold: |dz*/dpsi| = {tan[prev]:.3g} at the last gait found"
             out.append(
-                {"slope_deg": float(deg[i]), "last_slope_deg": float(deg[prev]),
-                 "result": names[i], "reason": reason}
+                {
+                    "slope_deg": float(deg[i]),
+                    "last_slope_deg": float(deg[prev]),
+                    "result": names[i],
+                    "reason": reason,
+                }
             )
         return out
 
@@ -102,8 +107,12 @@ def _hermite(ps, pa, za, ta):
         return za[0] + ta[0] * (ps - pa[0])[:, None]
     h = (pa[j + 1] - pa[j])[:, None]
     t = ((ps - pa[j])[:, None]) / h
-    z = ((2 * t**3 - 3 * t**2 + 1) * za[j] + (t**3 - 2 * t**2 + t) * h * ta[j]
-         + (-2 * t**3 + 3 * t**2) * za[j + 1] + (t**3 - t**2) * h * ta[j + 1])
+    z = (
+        (2 * t**3 - 3 * t**2 + 1) * za[j]
+        + (t**3 - 2 * t**2 + t) * h * ta[j]
+        + (-2 * t**3 + 3 * t**2) * za[j + 1]
+        + (t**3 - t**2) * h * ta[j + 1]
+    )
     below, above = ps < pa[0], ps > pa[-1]
     z[below] = za[0] + ta[0] * (ps[below] - pa[0])[:, None]
     z[above] = za[-1] + ta[-1] * (ps[above] - pa[-1])[:, None]
@@ -129,7 +138,7 @@ def _tangents(model, psis, zs, sign, method):
         m = j - i
         pad = chunk - m
         p = np.concatenate([psis[i:j], np.full(pad, psis[i])])
-        z = np.concatenate([zs[i:j], np.repeat(zs[i:i + 1], pad, axis=0)])
+        z = np.concatenate([zs[i:j], np.repeat(zs[i : i + 1], pad, axis=0)])
         return _tangents_padded(model, jnp.asarray(p), jnp.asarray(z), sign, method)[:m]
 
     return np.asarray(in_chunks(part, n, chunk, host_workers()))
@@ -170,8 +179,10 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
     # 2. coarse continuation from there over the slope range (path psi = p0 e^s)
     end = _with_psi(model, p0 * math.e)
     pa, za, ta = [], [], []
-    for grid in (_anchor_grid(p0, max(ps[-1], p0), anchor_step),
-                 _anchor_grid(p0, min(ps[0], p0), anchor_step)):
+    for grid in (
+        _anchor_grid(p0, max(ps[-1], p0), anchor_step),
+        _anchor_grid(p0, min(ps[0], p0), anchor_step),
+    ):
         g, t = _run_continuation(anchor_model, end, np.log(grid / p0), z0, sign, method)
         ok = np.asarray(g.result._value) == RESULTS.successful._value
         # A sequential continuation past a failure is unreliable: keep the run up to it.
@@ -181,8 +192,9 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
         za += list(z[:n_ok])
         ta += list(np.asarray(t)[:n_ok] / grid[:n_ok, None])  # d/dpsi = (d/ds) / psi
     if not pa:  # not even the first anchor: nothing to predict from
-        gaits = find_gaits(model, np.repeat(np.asarray(z0)[None], len(ps), 0), family, method,
-                           psi=jnp.asarray(ps))
+        gaits = find_gaits(
+            model, np.repeat(np.asarray(z0)[None], len(ps), 0), family, method, psi=jnp.asarray(ps)
+        )
         tangent = np.zeros((len(ps), len(z0)))
     else:
         pa, uniq = np.unique(np.asarray(pa), return_index=True)
@@ -226,8 +238,9 @@ def _retry(model, ps, gaits, family, method, sign, reach):
         if not found.any():
             break
         take, rows = miss[found], np.where(found)[0]
-        gaits = jax.tree_util.tree_map(lambda a, b: _put(a, take, np.asarray(b)[rows]),
-                                       gaits, again)
+        gaits = jax.tree_util.tree_map(
+            lambda a, b: _put(a, take, np.asarray(b)[rows]), gaits, again
+        )
         Z[take] = np.asarray(unknowns(again))[rows]
         T[take] = _tangents(model, ps[take], Z[take], sign, method)
         ok[take] = True

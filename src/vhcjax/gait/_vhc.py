@@ -22,6 +22,8 @@ import jax
 import jax.numpy as jnp
 
 from .. import mechanics as mech
+
+
 def constraint(theta, phi, dphi):
     """$\\Phi(\\theta)$ and $\\Phi'(\\theta)$ from $\\theta$ and $(\\phi, \\phi')$ (arrays of n-1)."""
     theta = jnp.asarray(theta)

@@ -18,8 +18,8 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from ..hybrid import solve_to_event
 from .._results import RESULTS
+from ..hybrid import solve_to_event
 from ._vhc import constraint, phi_second_derivative
 
 
@@ -78,8 +78,17 @@ def vhc_orbit(model, z, *, rtol=1e-11, atol=1e-11, max_steps=4096):
         (strike, bad), root_finder=optx.Newton(rtol=1e-13, atol=1e-13), direction=(False, None)
     )
     sol = solve_to_event(
-        _field, event.cond_fn, event.direction, y0, (model, E0, sign), -theta0,
-        -theta0 + jnp.pi, solver=diffrax.Tsit5(), rtol=rtol, atol=atol, max_steps=max_steps,
+        _field,
+        event.cond_fn,
+        event.direction,
+        y0,
+        (model, E0, sign),
+        -theta0,
+        -theta0 + jnp.pi,
+        solver=diffrax.Tsit5(),
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
     )
     s_end, y_end = sol.ts[-1], sol.ys[-1]
     phi, dphi = y_end[:k], y_end[k : 2 * k]
@@ -148,6 +157,12 @@ def vhc_gait_search(model, z0, *, rtol=1e-12, atol=1e-12, max_steps=40):
     )
     x_plus = model.section_to_state(z)
     return VHCGait(
-        z, x_plus, orb.x_minus, orb.period, model.energy(x_plus), sol.stats["num_steps"],
-        res, code,
+        z,
+        x_plus,
+        orb.x_minus,
+        orb.period,
+        model.energy(x_plus),
+        sol.stats["num_steps"],
+        res,
+        code,
     )

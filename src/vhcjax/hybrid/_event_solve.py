@@ -44,7 +44,18 @@ class EventSolution(eqx.Module):
 
 
 def solve_to_event(
-    field, conds, directions, y0, args, t0, t1, *, solver, rtol, atol, max_steps,
+    field,
+    conds,
+    directions,
+    y0,
+    args,
+    t0,
+    t1,
+    *,
+    solver,
+    rtol,
+    atol,
+    max_steps,
     norm=optx.rms_norm,
 ):
     """Integrate `field(t, y, args)` from `(t0, y0)` until the first of `conds` fires, or
@@ -67,8 +78,16 @@ def solve_to_event(
         tuple(eqx.filter_closure_convert(c, t, y0, args) for c in conds),
     )
     return _solve(
-        (fns, args), y0, t0, t1, directions=tuple(directions), solver=solver, rtol=rtol,
-        atol=atol, max_steps=max_steps, norm=norm,
+        (fns, args),
+        y0,
+        t0,
+        t1,
+        directions=tuple(directions),
+        solver=solver,
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+        norm=norm,
     )
 
 
@@ -128,8 +147,7 @@ def _differentiated(primal, tangent):
     primal = jtu.tree_map(
         lambda t, p: p if t is None else jnp.asarray(p), tangent, primal, is_leaf=none
     )
-    return primal, jtu.tree_map(lambda t: t if t is None else jnp.asarray(t), tangent,
-                                is_leaf=none)
+    return primal, jtu.tree_map(lambda t: t if t is None else jnp.asarray(t), tangent, is_leaf=none)
 
 
 def _axpy(a, x, y):
@@ -148,8 +166,9 @@ def _solve_jvp(primals, tangents, *, directions, solver, rtol, atol, max_steps, 
         dy0 = jtu.tree_map(lambda _: None, y0)
     # Symbolic zeros, also single leaves of a pytree state (the second-order rule's), as
     # arrays: they are states of the variational equation.
-    dy0 = jtu.tree_map(lambda p, t: jnp.zeros_like(p) if t is None else t, y0, dy0,
-                       is_leaf=lambda x: x is None)
+    dy0 = jtu.tree_map(
+        lambda p, t: jnp.zeros_like(p) if t is None else t, y0, dy0, is_leaf=lambda x: x is None
+    )
     t0 = jnp.asarray(t0, dtype)
     t1 = jnp.asarray(t1, dtype)
     dt1 = jnp.zeros_like(t1) if dt1 is None else dt1
@@ -175,8 +194,17 @@ def _solve_jvp(primals, tangents, *, directions, solver, rtol, atol, max_steps, 
     # this rule again), with the error control of the primal state alone: the steps and
     # the event are those of the plain solve.
     sol = solve_to_event(
-        aug_field, tuple(_lift(c) for c in conds), directions, (y0, dy0), args, t0, t1,
-        solver=solver, rtol=rtol, atol=atol, max_steps=max_steps,
+        aug_field,
+        tuple(_lift(c) for c in conds),
+        directions,
+        (y0, dy0),
+        args,
+        t0,
+        t1,
+        solver=solver,
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
         norm=lambda e: norm(e[0]),
     )
     result, mask = sol.result, sol.event_mask
@@ -198,8 +226,10 @@ def _solve_jvp(primals, tangents, *, directions, solver, rtol, atol, max_steps, 
     dy_end = _axpy(dtau, f, dy)
     out = EventSolution(sol.ts, jtu.tree_map(lambda v: v[-1:], sol.ys[0]), result, mask)
     dout = EventSolution(
-        dtau[None], jtu.tree_map(lambda v: v[None], dy_end),
-        jtu.tree_map(lambda _: None, result), tuple(None for _ in mask),
+        dtau[None],
+        jtu.tree_map(lambda v: v[None], dy_end),
+        jtu.tree_map(lambda _: None, result),
+        tuple(None for _ in mask),
     )
     return out, dout
 

@@ -30,9 +30,9 @@ import jax
 import jax.numpy as jnp
 
 from .. import mechanics as mech
-from ._simulate import DEFAULT_CONFIG, StepResult, _swing, flow
-from ..mechanics import WalkerModel
 from .._results import RESULTS
+from ..mechanics import WalkerModel
+from ._simulate import DEFAULT_CONFIG, StepResult, _swing, flow
 
 
 # ---- generic constrained mechanics --------------------------------------------------------
@@ -229,7 +229,10 @@ def multidomain_step(model, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None)
         lambda r: r._value, RESULTS.successful, jnp.stack([c._value for c in codes])
     )
     info = DomainInfo(
-        jnp.stack(starts), jnp.stack(ends), jnp.stack(durations), jnp.stack(impulses),
+        jnp.stack(starts),
+        jnp.stack(ends),
+        jnp.stack(durations),
+        jnp.stack(impulses),
         result_stack,
     )
     return StepResult(x_minus, x_plus, total, impulse, code), info

@@ -13,8 +13,8 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from ._simulate import DEFAULT_CONFIG, step_unchecked
 from .._results import RESULTS
+from ._simulate import DEFAULT_CONFIG, step_unchecked
 
 
 class MapResult(eqx.Module):

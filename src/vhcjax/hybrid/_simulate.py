@@ -16,10 +16,10 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from ._event_solve import solve_to_event
 from .. import trig
-from .._results import RESULTS
 from .._batching import host_workers, in_chunks, round_to_devices, shard_batch
+from .._results import RESULTS
+from ._event_solve import solve_to_event
 
 
 class SolverConfig(NamedTuple):
@@ -83,8 +83,17 @@ def _event(model, gate=False):
 
 
 def flow(
-    model, x0, t1, config=DEFAULT_CONFIG, *, saveat=None, event=True, adjoint=None,
-    vector_field=None, gate=False, t0: float | jax.Array = 0.0,
+    model,
+    x0,
+    t1,
+    config=DEFAULT_CONFIG,
+    *,
+    saveat=None,
+    event=True,
+    adjoint=None,
+    vector_field=None,
+    gate=False,
+    t0: float | jax.Array = 0.0,
 ):
     """Integrate the swing dynamics from `x0` over `[t0, t1]`, stopping at heel strike
     (or, with `gate=True`, where the strike gate opens).
@@ -96,8 +105,17 @@ def flow(
     if event and saveat is None and adjoint is None:
         ev = _event(model, gate)
         return solve_to_event(
-            vf, ev.cond_fn, ev.direction, x0, None, t0, t1, solver=ode_solver(config.solver),
-            rtol=config.rtol, atol=config.atol, max_steps=config.max_steps,
+            vf,
+            ev.cond_fn,
+            ev.direction,
+            x0,
+            None,
+            t0,
+            t1,
+            solver=ode_solver(config.solver),
+            rtol=config.rtol,
+            atol=config.atol,
+            max_steps=config.max_steps,
         )
     return diffrax.diffeqsolve(
         diffrax.ODETerm(vf),
@@ -185,16 +203,32 @@ def _swing(model, x0, t_max, alive, config, adjoint, vector_field):
     y0 = jnp.concatenate([x0, jnp.zeros((1,), x0.dtype)])
     if adjoint is None:
         sol = solve_to_event(
-            field, event.cond_fn, event.direction, y0, None, 0.0, t1,
-            solver=ode_solver(config.solver), rtol=config.rtol, atol=config.atol,
+            field,
+            event.cond_fn,
+            event.direction,
+            y0,
+            None,
+            0.0,
+            t1,
+            solver=ode_solver(config.solver),
+            rtol=config.rtol,
+            atol=config.atol,
             max_steps=config.max_steps,
         )
     else:
         sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(field), ode_solver(config.solver), t0=0.0, t1=t1, dt0=None, y0=y0,
+            diffrax.ODETerm(field),
+            ode_solver(config.solver),
+            t0=0.0,
+            t1=t1,
+            dt0=None,
+            y0=y0,
             stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
-            saveat=diffrax.SaveAt(t1=True), event=event, max_steps=config.max_steps,
-            adjoint=adjoint, throw=False,
+            saveat=diffrax.SaveAt(t1=True),
+            event=event,
+            max_steps=config.max_steps,
+            adjoint=adjoint,
+            throw=False,
         )
     assert sol.ys is not None and sol.ts is not None  # saved at t1
     return sol.ys[-1][:-1], sol.ts[-1], classify_solve(sol)
@@ -211,9 +245,7 @@ def step_unchecked(model, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None, v
     x_minus, period, code = _swing(model, x_safe, t_max, alive, config, adjoint, vector_field)
     x_plus, impulse, physical = model.impact(x_minus)
     finite = jnp.all(jnp.isfinite(x_plus)) & jnp.all(jnp.isfinite(impulse))
-    code = RESULTS.where(
-        (code == RESULTS.successful) & ~physical, RESULTS.bad_impact, code
-    )
+    code = RESULTS.where((code == RESULTS.successful) & ~physical, RESULTS.bad_impact, code)
     code = RESULTS.where((code == RESULTS.successful) & ~finite, RESULTS.nonfinite, code)
     code = RESULTS.where(finite0, code, RESULTS.nonfinite)
     ok = code == RESULTS.successful
@@ -276,9 +308,11 @@ def _check_state_shape(model, x0):
     """A one-line error naming the expected shape (at trace time: shapes are static)."""
     n = model.n_dof
     if jnp.shape(x0) != (2 * n,):
-        raise ValueError(f"x0 must be one state [q, dq] of shape ({2 * n},) for "
-                         f"{type(model).__name__} ({n} joint angles and their rates), got "
-                         f"shape {jnp.shape(x0)}; for a batch use `simulate_batch` or vmap")
+        raise ValueError(
+            f"x0 must be one state [q, dq] of shape ({2 * n},) for "
+            f"{type(model).__name__} ({n} joint angles and their rates), got "
+            f"shape {jnp.shape(x0)}; for a batch use `simulate_batch` or vmap"
+        )
 
 
 def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):

@@ -16,7 +16,6 @@ from ._lagrangian import (
     mass_matrix as mass_matrix,
     solve_small as solve_small,
 )
-
 from ._model import (
     WalkerModel as WalkerModel,
 )

@@ -18,6 +18,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from . import _lagrangian as mech
+
+
 class WalkerModel(eqx.Module):
     """Abstract single-domain hybrid Lagrangian system with a point-foot heel strike.
 
@@ -75,11 +77,19 @@ class WalkerModel(eqx.Module):
             v = getattr(self, field.name, None)
             try:
                 a = np.asarray(v)
-                text = f"{a.item():.6g}" if a.ndim == 0 and a.dtype.kind in "fiu" else (
-                    np.array2string(a, precision=6, separator=", ") if a.dtype.kind in "fiu"
-                    else repr(v))
-            except (jax.errors.TracerArrayConversionError,
-                    jax.errors.ConcretizationTypeError):  # a tracer (inside jit/vmap)
+                text = (
+                    f"{a.item():.6g}"
+                    if a.ndim == 0 and a.dtype.kind in "fiu"
+                    else (
+                        np.array2string(a, precision=6, separator=", ")
+                        if a.dtype.kind in "fiu"
+                        else repr(v)
+                    )
+                )
+            except (
+                jax.errors.TracerArrayConversionError,
+                jax.errors.ConcretizationTypeError,
+            ):  # a tracer (inside jit/vmap)
                 text = repr(v)
             parts.append(f"{field.name}={text}")
         return f"{type(self).__name__}({', '.join(parts)})"

@@ -5,11 +5,9 @@
 from ._compass_gait import (
     CompassGait as CompassGait,
 )
-
 from ._kneed_walker import (
     KneedWalker as KneedWalker,
 )
-
 from ._pendulum_walker import (
     PendulumWalker as PendulumWalker,
 )

@@ -106,7 +106,9 @@ class CompassGait(WalkerModel):
         v1, vH, v2 = v["stance_mass"] + v0, v["hip"] + v0, v["swing_mass"] + v0
         # Squares summed elementwise, not `v @ v`: under nested autodiff and vmap XLA
         # compiles every small dot_general as a kernel of its own (slow to compile).
-        return 0.5 * (self.m1 * jnp.sum(v1 * v1) + self.mH * jnp.sum(vH * vH) + self.m2 * jnp.sum(v2 * v2))
+        return 0.5 * (
+            self.m1 * jnp.sum(v1 * v1) + self.mH * jnp.sum(vH * vH) + self.m2 * jnp.sum(v2 * v2)
+        )
 
     def potential_energy(self, q):
         """Gravitational energy (thesis 3.4), zero with both legs vertical, as in (5.10)."""
@@ -114,7 +116,9 @@ class CompassGait(WalkerModel):
         zero = self.points(jnp.zeros_like(q))
 
         def height(p):
-            return self.m1 * p["stance_mass"][1] + self.mH * p["hip"][1] + self.m2 * p["swing_mass"][1]
+            return (
+                self.m1 * p["stance_mass"][1] + self.mH * p["hip"][1] + self.m2 * p["swing_mass"][1]
+            )
 
         return self.g * (height(pts) - height(zero))
 

@@ -104,8 +104,11 @@ class KneedWalker(MultiDomainModel):
         }
 
     _MASSES: ClassVar[tuple] = (
-        ("stance_shank", "ms"), ("stance_thigh", "mt"), ("hip", "mh"),
-        ("swing_thigh", "mt"), ("swing_shank", "ms"),
+        ("stance_shank", "ms"),
+        ("stance_thigh", "mt"),
+        ("hip", "mh"),
+        ("swing_thigh", "mt"),
+        ("swing_shank", "ms"),
     )
 
     def contact_point(self, q):
@@ -114,9 +117,7 @@ class KneedWalker(MultiDomainModel):
     def kinetic_energy(self, q, dq, base_velocity=None):
         v0 = jnp.zeros(2, jnp.result_type(q, float)) if base_velocity is None else base_velocity
         _, vel = jax.jvp(self.points, (q,), (dq,))
-        return 0.5 * sum(
-            getattr(self, m) * jnp.sum((vel[p] + v0) ** 2) for p, m in self._MASSES
-        )
+        return 0.5 * sum(getattr(self, m) * jnp.sum((vel[p] + v0) ** 2) for p, m in self._MASSES)
 
     def potential_energy(self, q):
         pts, zero = self.points(q), self.points(jnp.zeros_like(q))
@@ -219,5 +220,3 @@ class KneedWalker(MultiDomainModel):
 
     def state_to_section(self, x):
         return jnp.stack([x[0], x[3], x[4]])
-
-

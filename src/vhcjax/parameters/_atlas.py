@@ -21,8 +21,9 @@ from ..models import CompassGait
 from ._flip import _det_and_radius, _with_psi, flip_slopes
 
 
-def grid_model(mass_ratio, length_ratio, *, mass_leg=5.0, leg_length=1.0, gravity=9.81,
-               psi=math.radians(3.0)):
+def grid_model(
+    mass_ratio, length_ratio, *, mass_leg=5.0, leg_length=1.0, gravity=9.81, psi=math.radians(3.0)
+):
     """`CompassGait` with $m_1 = m_2 = $ `mass_leg`, $m_H = \\mu m$, $a = l/(1 + \\beta)$,
     $b = l\\beta/(1 + \\beta)$ (arrays broadcast: a batch of models)."""
     mu = jnp.asarray(mass_ratio, float)
@@ -30,8 +31,15 @@ def grid_model(mass_ratio, length_ratio, *, mass_leg=5.0, leg_length=1.0, gravit
     a = leg_length / (1.0 + beta)
     shape = jnp.broadcast_shapes(mu.shape, beta.shape)
     full = lambda v: jnp.broadcast_to(jnp.asarray(v, float), shape)
-    return CompassGait(m1=full(mass_leg), m2=full(mass_leg), mH=full(mu * mass_leg), a=full(a),
-                       b=full(beta * a), g=full(gravity), psi=full(psi))
+    return CompassGait(
+        m1=full(mass_leg),
+        m2=full(mass_leg),
+        mH=full(mu * mass_leg),
+        a=full(a),
+        b=full(beta * a),
+        g=full(gravity),
+        psi=full(psi),
+    )
 
 
 #: The stable gait of thesis Table 1 at 3 degrees (section point), the homotopy's start.
@@ -79,15 +87,25 @@ class Atlas(eqx.Module):
     stable_range: np.ndarray
     spectral_radius: np.ndarray
     reason: list = eqx.field(static=True)
-    slope: float = eqx.field(static=True)
+    slope: float | None = eqx.field(static=True)
     psi_start: float = eqx.field(static=True)
     psi_max: float = eqx.field(static=True)
     step: float = eqx.field(static=True)
 
 
-def atlas(mass_ratio, length_ratio, *, slope=None, mass_leg=5.0, leg_length=1.0,
-          gravity=9.81, psi_start=math.radians(1.0), psi_max=math.radians(12.0),
-          step=math.radians(0.5), tol=1e-10):
+def atlas(
+    mass_ratio,
+    length_ratio,
+    *,
+    slope=None,
+    mass_leg=5.0,
+    leg_length=1.0,
+    gravity=9.81,
+    psi_start=math.radians(1.0),
+    psi_max=math.radians(12.0),
+    step=math.radians(0.5),
+    tol=1e-10,
+):
     """The atlas of the stable compass gait over a grid of $\\mu$ and $\\beta$.
 
     **Arguments:**
@@ -104,17 +122,25 @@ def atlas(mass_ratio, length_ratio, *, slope=None, mass_leg=5.0, leg_length=1.0,
     mu = np.atleast_1d(np.asarray(mass_ratio, float))
     beta = np.atleast_1d(np.asarray(length_ratio, float))
     MU, BETA = np.meshgrid(mu, beta, indexing="ij")
-    model = grid_model(MU.ravel(), BETA.ravel(), mass_leg=mass_leg, leg_length=leg_length,
-                       gravity=gravity, psi=psi_start)
+    model = grid_model(
+        MU.ravel(),
+        BETA.ravel(),
+        mass_leg=mass_leg,
+        leg_length=leg_length,
+        gravity=gravity,
+        psi=psi_start,
+    )
     N = MU.size
     # Seeds on the walker with the default scales (the homotopy from Table 1 changes mu and
     # beta only), mapped to these scales: angles are unchanged, velocities scale with
     # sqrt(g / l).
     z0 = seed_gaits(grid_model(MU.ravel(), BETA.ravel(), psi=psi_start))
     z0[:, 1:] *= math.sqrt((gravity / leg_length) / (9.81 / 1.0))
-    ok = np.isfinite(z0).all(axis=1)
+    ok = np.asarray(np.isfinite(z0).all(axis=1), dtype=bool)
     scan = flip_slopes(model, z0, psi_start, psi_max=psi_max, step=step, tol=tol)
-    reason = [r if ok[i] else "no stable gait at the start of the scan" for i, r in enumerate(scan.reason)]
+    reason = [
+        r if ok[i] else "no stable gait at the start of the scan" for i, r in enumerate(scan.reason)
+    ]
     rho = np.full(N, np.nan)
     if slope is not None and ok.any():
         # continue each cell's start gait to `slope` in steps of at most `step`
@@ -129,9 +155,18 @@ def atlas(mass_ratio, length_ratio, *, slope=None, mass_leg=5.0, leg_length=1.0,
         _, r = _det_and_radius(_with_psi(model, np.full(N, slope)), jnp.asarray(z))
         rho = np.where(alive, np.asarray(r), np.nan)
     shape = MU.shape
-    return Atlas(mu, beta, scan.psi.reshape(shape), scan.stable_range.reshape(shape + (2,)),
-                 rho.reshape(shape), reason, None if slope is None else float(slope),
-                 float(psi_start), float(psi_max), float(step))
+    return Atlas(
+        mu,
+        beta,
+        scan.psi.reshape(shape),
+        scan.stable_range.reshape(shape + (2,)),
+        rho.reshape(shape),
+        reason,
+        None if slope is None else float(slope),
+        float(psi_start),
+        float(psi_max),
+        float(step),
+    )
 
 
 def atlas_json(at):
@@ -144,10 +179,14 @@ def atlas_json(at):
             lo, hi = at.stable_range[i, j]
             r = at.spectral_radius[i, j]
             cell = {
-                "mass_ratio": float(m), "length_ratio": float(b),
+                "mass_ratio": float(m),
+                "length_ratio": float(b),
                 "flip_slope_deg": float(math.degrees(f)) if np.isfinite(f) else None,
-                "stable_range_deg": ([float(math.degrees(lo)), float(math.degrees(hi))]
-                                     if np.isfinite(lo) and np.isfinite(hi) else None),
+                "stable_range_deg": (
+                    [float(math.degrees(lo)), float(math.degrees(hi))]
+                    if np.isfinite(lo) and np.isfinite(hi)
+                    else None
+                ),
                 "spectral_radius": float(r) if np.isfinite(r) else None,
             }
             if not np.isfinite(f):
@@ -155,5 +194,8 @@ def atlas_json(at):
             if at.slope is not None and not np.isfinite(r):
                 cell["spectral_radius_reason"] = "no period-1 gait found at the slope"
             cells.append(cell)
-    return {"mass_ratio": [float(m) for m in at.mass_ratio],
-            "length_ratio": [float(b) for b in at.length_ratio], "cells": cells}
+    return {
+        "mass_ratio": [float(m) for m in at.mass_ratio],
+        "length_ratio": [float(b) for b in at.length_ratio],
+        "cells": cells,
+    }

@@ -39,8 +39,13 @@ PARAMETERS = {
 #: Units of the parameters (for labels).
 UNITS = {"mass-hip": "kg", "mass-leg": "kg", "a": "m", "b": "m", "gravity": "m/s^2"}
 #: Default bounds of the parameters.
-DEFAULT_BOUNDS = {"mass-hip": (1.0, 40.0), "mass-leg": (1.0, 20.0), "a": (0.1, 0.9),
-                  "b": (0.1, 0.9), "gravity": (1.0, 20.0)}
+DEFAULT_BOUNDS = {
+    "mass-hip": (1.0, 40.0),
+    "mass-leg": (1.0, 20.0),
+    "a": (0.1, 0.9),
+    "b": (0.1, 0.9),
+    "gravity": (1.0, 20.0),
+}
 OBJECTIVES = ("spectral-radius", "flip-slope", "speed")
 #: +1: minimised as is; -1: maximised (the optimiser minimises -value).
 _SENSE = {"spectral-radius": 1.0, "flip-slope": -1.0, "speed": -1.0}
@@ -119,8 +124,17 @@ def projected_gradient(u, grad_u, sense):
     return np.where(at_lo | at_hi, 0.0, gm)
 
 
-def design(objective, vary, *, model=None, bounds=None, steps=40, learning_rate=0.05,
-           gtol=1e-4, callback=None):
+def design(
+    objective,
+    vary,
+    *,
+    model=None,
+    bounds=None,
+    steps=40,
+    learning_rate=0.05,
+    gtol=1e-4,
+    callback=None,
+):
     """Optimise a compass-gait walker for `objective` over the parameters `vary`.
 
     **Arguments:**
@@ -170,11 +184,13 @@ def design(objective, vary, *, model=None, bounds=None, steps=40, learning_rate=
     scale = max(np.abs(grad * (hi - lo)).max(), 1e-12)
 
     def entry(k, x, v):
-        return {"iteration": k, "params": parameters_of(with_parameters(base, vary, x)),
-                "value": v}
+        return {"iteration": k, "params": parameters_of(with_parameters(base, vary, x)), "value": v}
 
-    initial = {"params": parameters_of(with_parameters(base, vary, x)), "value": v,
-               "gradient": dict(zip(vary, map(float, grad)))}
+    initial = {
+        "params": parameters_of(with_parameters(base, vary, x)),
+        "value": v,
+        "gradient": dict(zip(vary, map(float, grad))),
+    }
     history = [entry(0, x, v)]
     if callback is not None:
         callback(history[-1])
@@ -213,12 +229,16 @@ def design(objective, vary, *, model=None, bounds=None, steps=40, learning_rate=
             result = "successful"
     best = with_parameters(base, vary, x)
     spec = gait_spectrum(best, gait)
-    optimum = {"params": parameters_of(best), "value": v,
-               "gradient": dict(zip(vary, map(float, grad))),
-               "x0": [float(t) for t in np.asarray(gait.x_plus)],
-               "multipliers": [complex(t) for t in np.asarray(spec.multipliers)]}
-    return DesignResult(objective, vary, bounds, result, k, initial, optimum,
-                        float(np.abs(pg).max()), history, best)
+    optimum = {
+        "params": parameters_of(best),
+        "value": v,
+        "gradient": dict(zip(vary, map(float, grad))),
+        "x0": [float(t) for t in np.asarray(gait.x_plus)],
+        "multipliers": [complex(t) for t in np.asarray(spec.multipliers)],
+    }
+    return DesignResult(
+        objective, vary, bounds, result, k, initial, optimum, float(np.abs(pg).max()), history, best
+    )
 
 
 def slope_deg(model):

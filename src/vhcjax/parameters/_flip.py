@@ -33,7 +33,9 @@ def _with_psi(model, psi):
 def _det_and_radius(model, zs):
     """$\\det(I + J)$ and the spectral radius at the section points `zs` (batched with the
     model's leading axis where it has one)."""
-    axes = jax.tree_util.tree_map(lambda x: 0 if (eqx.is_array(x) and jnp.ndim(x) > 0) else None, model)
+    axes = jax.tree_util.tree_map(
+        lambda x: 0 if (eqx.is_array(x) and jnp.ndim(x) > 0) else None, model
+    )
 
     def one(m, z):
         J = jacobian(m, z, 1, DEFAULT_CONFIG)
@@ -44,7 +46,11 @@ def _det_and_radius(model, zs):
 
 def _broadcast(model, B):
     return jax.tree_util.tree_map(
-        lambda x: jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:]) if (eqx.is_array(x) and jnp.ndim(x) > 0) else x,
+        lambda x: (
+            jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])
+            if (eqx.is_array(x) and jnp.ndim(x) > 0)
+            else x
+        ),
         model,
     )
 
@@ -78,8 +84,16 @@ class FlipScan(eqx.Module):
     reason: list = eqx.field(static=True)
 
 
-def flip_slopes(model, z_start, psi_start, *, psi_max=math.radians(12.0),
-                step=math.radians(0.25), tol=1e-12, max_iter=60):
+def flip_slopes(
+    model,
+    z_start,
+    psi_start,
+    *,
+    psi_max=math.radians(12.0),
+    step=math.radians(0.25),
+    tol=1e-12,
+    max_iter=60,
+):
     """First flip slope of the stable period-1 gait for each model of a batch.
 
     **Arguments:**
@@ -97,15 +111,20 @@ def flip_slopes(model, z_start, psi_start, *, psi_max=math.radians(12.0),
     z_start = np.asarray(z_start, float)
     B = z_start.shape[0]
     model = _broadcast(model, B)
-    alive = np.isfinite(z_start).all(axis=1)
+    alive = np.asarray(np.isfinite(z_start).all(axis=1), dtype=bool)
     z = np.where(alive[:, None], z_start, np.nan_to_num(z_start[alive][0]) if alive.any() else 0.0)
     slopes = np.arange(psi_start, psi_max + 0.5 * step, step)
     lo = np.full(B, np.nan)
     hi = np.full(B, np.nan)
     bracket = np.zeros(B, bool)
-    a = np.full(B, np.nan); fa = np.full(B, np.nan); za = z.copy()
-    b = np.full(B, np.nan); fb = np.full(B, np.nan); zb = z.copy()
-    ra = np.full(B, np.nan); rb = np.full(B, np.nan)
+    a = np.full(B, np.nan)
+    fa = np.full(B, np.nan)
+    za = z.copy()
+    b = np.full(B, np.nan)
+    fb = np.full(B, np.nan)
+    zb = z.copy()
+    ra = np.full(B, np.nan)
+    rb = np.full(B, np.nan)
     reason = ["" for _ in range(B)]
     for psi in slopes:
         todo = alive & ~bracket
@@ -116,7 +135,9 @@ def flip_slopes(model, z_start, psi_start, *, psi_max=math.radians(12.0),
         lo = np.where(todo & stable & np.isnan(lo), psi, lo)
         cross = todo & ok & (F < 0) & np.isfinite(fa)
         # the first sign change of F: bracket [previous slope, this slope]
-        b = np.where(cross, psi, b); fb = np.where(cross, F, fb); zb = np.where(cross[:, None], zs, zb)
+        b = np.where(cross, psi, b)
+        fb = np.where(cross, F, fb)
+        zb = np.where(cross[:, None], zs, zb)
         rb = np.where(cross, rho, rb)
         bracket |= cross
         lost = todo & ~ok & ~cross
@@ -124,7 +145,9 @@ def flip_slopes(model, z_start, psi_start, *, psi_max=math.radians(12.0),
             reason[i] = f"the period-1 gait was lost at {math.degrees(psi):.3f} deg before a flip"
         alive &= ~lost
         keep = todo & ok & ~cross
-        a = np.where(keep, psi, a); fa = np.where(keep, F, fa); za = np.where(keep[:, None], zs, za)
+        a = np.where(keep, psi, a)
+        fa = np.where(keep, F, fa)
+        za = np.where(keep[:, None], zs, za)
         ra = np.where(keep, rho, ra)
         hi = np.where(keep & stable, psi, hi)
         z = np.where(keep[:, None], zs, z)  # continuation: the next slope starts here
@@ -153,10 +176,14 @@ def flip_slopes(model, z_start, psi_start, *, psi_max=math.radians(12.0),
         same = active & (Fc * fb > 0)  # root between a and c
         other = active & ~same
         # other: root between c and b -> a <- b
-        a = np.where(other, b, a); fa = np.where(other, fb, fa); za = np.where(other[:, None], zb, za)
+        a = np.where(other, b, a)
+        fa = np.where(other, fb, fa)
+        za = np.where(other[:, None], zb, za)
         fa = np.where(same & (side == 1), 0.5 * fa, fa)
         side = np.where(other, 0, np.where(same, 1, side))
-        b = np.where(active, c, b); fb = np.where(active, Fc, fb); zb = np.where(active[:, None], zc, zb)
+        b = np.where(active, c, b)
+        fb = np.where(active, Fc, fb)
+        zb = np.where(active[:, None], zc, zb)
         active &= np.abs(b - a) > tol
         it += 1
     psi_f = np.where(bracket, b, np.nan)
@@ -183,7 +210,9 @@ def flip_slope(model, z_start, *, psi_max=math.radians(12.0), step=math.radians(
     was found below `psi_max`."""
     params = model
     m = detach(model)
-    scan = flip_slopes(m, np.asarray(z_start, float)[None], float(m.psi), psi_max=psi_max, step=step)
+    scan = flip_slopes(
+        m, np.asarray(z_start, float)[None], float(m.psi), psi_max=psi_max, step=step
+    )
     psi_f, z_f = float(scan.psi[0]), scan.z[0]
     return _attach_flip(params, jnp.asarray(psi_f), jnp.asarray(z_f))
 

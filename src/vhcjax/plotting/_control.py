@@ -48,8 +48,14 @@ def plot_stabilization(path, title, s, K, closed_errors, passive_errors, basin=N
 
     ax = axes[2]
     if basin is None:
-        ax.text(0.5, 0.5, "basin not computed\n(run with --basin)", ha="center",
-                va="center", transform=ax.transAxes)
+        ax.text(
+            0.5,
+            0.5,
+            "basin not computed\n(run with --basin)",
+            ha="center",
+            va="center",
+            transform=ax.transAxes,
+        )
         ax.set_axis_off()
     else:
         z = basin["z_star"]
@@ -60,17 +66,30 @@ def plot_stabilization(path, title, s, K, closed_errors, passive_errors, basin=N
         from matplotlib.colors import ListedColormap
 
         cmap = ListedColormap(["#eeeeee", "#2ca02c", "#1f77b4", "#9467bd"])
-        ax.imshow(code.T, origin="lower", extent=extent, aspect="auto", cmap=cmap,
-                  vmin=-0.5, vmax=3.5, interpolation="nearest")
+        ax.imshow(
+            code.T,
+            origin="lower",
+            extent=extent,
+            aspect="auto",
+            cmap=cmap,
+            vmin=-0.5,
+            vmax=3.5,
+            interpolation="nearest",
+        )
         ax.plot(z[0], z[1], "r*", ms=12, mec="k", label="gait")
-        for c, name in ((1, "converges with feedback only"), (2, "converges passive only"),
-                        (3, "converges both")):
+        for c, name in (
+            (1, "converges with feedback only"),
+            (2, "converges passive only"),
+            (3, "converges both"),
+        ):
             ax.plot([], [], "s", color=cmap(c), label=name)
         ax.plot([], [], "s", color=cmap(0), label="does not converge")
         ax.set_xlabel(r"$q_1$ just after impact (rad)")
         ax.set_ylabel(r"$\dot q_1$ just after impact (rad/s)")
-        ax.set_title(f"Basin slice: passive {np.mean(basin['passive']):.2f}, "
-                     f"with feedback {np.mean(basin['closed']):.2f}")
+        ax.set_title(
+            f"Basin slice: passive {np.mean(basin['passive']):.2f}, "
+            f"with feedback {np.mean(basin['closed']):.2f}"
+        )
         ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3)
     fig.suptitle(title)
     fig.tight_layout()

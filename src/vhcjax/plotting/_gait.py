@@ -34,8 +34,9 @@ def plot_sweep(sweeps, path=None, case=None):
     for ax in axes[1]:
         ax.set_xlabel("slope (deg)")
     axes[0, 0].legend()
-    fig.suptitle("Compass-gait periodic gaits against slope (continuation)"
-                 + (f": {case}" if case else ""))
+    fig.suptitle(
+        "Compass-gait periodic gaits against slope (continuation)" + (f": {case}" if case else "")
+    )
     fig.tight_layout()
     if path is not None:
         fig.savefig(path, dpi=120)

@@ -9,8 +9,11 @@ from ._common import pyplot
 #: Units of the parameters a design varies (CLI names).
 UNITS = {"mass-hip": "kg", "mass-leg": "kg", "a": "m", "b": "m", "gravity": "m/s^2"}
 
-_LABELS = {"spectral-radius": "spectral radius (-)", "flip-slope": "flip slope (deg)",
-           "speed": "speed (m/s)"}
+_LABELS = {
+    "spectral-radius": "spectral radius (-)",
+    "flip-slope": "flip slope (deg)",
+    "speed": "speed (m/s)",
+}
 
 
 def _value(objective, v):
@@ -28,15 +31,21 @@ def plot_design(result, path, slope_deg):
     ax1.grid(alpha=0.3)
     for name in result.vary:
         lo, hi = result.bounds[name]
-        ax2.plot(it, [(h["params"][name] - lo) / (hi - lo) for h in result.history], "o-",
-                 label=f"{name}: {lo:g} to {hi:g} {UNITS[name]}")
+        ax2.plot(
+            it,
+            [(h["params"][name] - lo) / (hi - lo) for h in result.history],
+            "o-",
+            label=f"{name}: {lo:g} to {hi:g} {UNITS[name]}",
+        )
     ax2.set_ylim(-0.05, 1.05)
     ax2.set_xlabel("iteration (-)")
     ax2.set_ylabel("position within bounds (-)")
     ax2.legend()
     ax2.grid(alpha=0.3)
-    fig.suptitle(f"Compass-gait design: {result.objective} at {slope_deg:g} deg, "
-                 f"varying {', '.join(result.vary)} ({result.result})")
+    fig.suptitle(
+        f"Compass-gait design: {result.objective} at {slope_deg:g} deg, "
+        f"varying {', '.join(result.vary)} ({result.result})"
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
@@ -56,17 +65,21 @@ def plot_atlas(at, path, *, mass_leg, leg_length, gravity):
         mid = 0.5 * (v[1:] + v[:-1])
         return np.concatenate([[2 * v[0] - mid[0]], mid, [2 * v[-1] - mid[-1]]])
 
-    mesh = ax.pcolormesh(edges(mu), edges(beta), np.ma.masked_invalid(deg).T, shading="flat",
-                         cmap="viridis")
+    mesh = ax.pcolormesh(
+        edges(mu), edges(beta), np.ma.masked_invalid(deg).T, shading="flat", cmap="viridis"
+    )
     fig.colorbar(mesh, ax=ax, label="first period-doubling slope (deg)")
     if len(mu) > 1 and len(beta) > 1 and np.isfinite(deg).sum() > 3:
         cs = ax.contour(mu, beta, np.ma.masked_invalid(deg).T, colors="white", linewidths=0.8)
         ax.clabel(cs, fmt="%.2f", fontsize=8)
     ax.set_xlabel(r"mass ratio $\mu = m_H / m$ (-)")
     ax.set_ylabel(r"length ratio $\beta = b / a$ (-)")
-    ax.set_title(f"Compass gait: flip slope of the stable gait on a {len(mu)} x {len(beta)} "
-                 f"grid\nm = {mass_leg:g} kg, l = {leg_length:g} m, g = {gravity:g} m/s^2; "
-                 "blank: no flip found", fontsize=10)
+    ax.set_title(
+        f"Compass gait: flip slope of the stable gait on a {len(mu)} x {len(beta)} "
+        f"grid\nm = {mass_leg:g} kg, l = {leg_length:g} m, g = {gravity:g} m/s^2; "
+        "blank: no flip found",
+        fontsize=10,
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

@@ -5,8 +5,6 @@ import numpy as np
 from ._common import pyplot
 
 
-
-
 def _save(fig, path):
     """Save to `path` (if given) and close; return the figure either way."""
     if path is not None:
@@ -38,23 +36,41 @@ def plot_basin(b, path=None, title=None, case=None):
     fig, ax = plt.subplots(figsize=(6.4, 5.2), dpi=130)
     extent = (X[0], X[-1], Y[0], Y[-1])
     steps = np.where(b.label == CONVERGED, b.steps, np.nan).astype(float)
-    im = ax.imshow(steps, origin="lower", extent=extent, aspect="auto", cmap="viridis_r",
-                   interpolation="nearest")
+    im = ax.imshow(
+        steps,
+        origin="lower",
+        extent=extent,
+        aspect="auto",
+        cmap="viridis_r",
+        interpolation="nearest",
+    )
     for lab, color in ((FELL, "#bdbdbd"), (OTHER_CYCLE, "#d62728"), (UNDECIDED, "#ffffff")):
         mask = np.where(b.label == lab, 1.0, np.nan)
         if np.any(b.label == lab):
-            ax.imshow(mask, origin="lower", extent=extent, aspect="auto",
-                      cmap=ListedColormap([color]), interpolation="nearest")
-    ax.plot(b.z_star[ix], b.z_star[iy], marker="*", color="red", ms=14, mec="k",
-            label="gait", ls="none")
+            ax.imshow(
+                mask,
+                origin="lower",
+                extent=extent,
+                aspect="auto",
+                cmap=ListedColormap([color]),
+                interpolation="nearest",
+            )
+    ax.plot(
+        b.z_star[ix], b.z_star[iy], marker="*", color="red", ms=14, mec="k", label="gait", ls="none"
+    )
     cb = fig.colorbar(im, ax=ax)
     cb.set_label(f"steps to converge (within {b.tol:g} of the gait)")
     ax.set_xlabel(SECTION_LABELS[ix] + " just after impact")
     ax.set_ylabel(SECTION_LABELS[iy] + " just after impact")
     other = [k for k in range(len(b.z_star)) if k not in b.axes]
     fixed = ", ".join(f"{SECTION_SYMBOLS[k]} = {b.z_star[k]:.4f}" for k in other)
-    ax.set_title(title or _case("Basin of attraction", case) + f", slice ({fixed}); grey: falls\n"
-                 f"converging area {b.area:.4g}, fraction {b.fraction:.3f}", fontsize=9)
+    ax.set_title(
+        title
+        or _case("Basin of attraction", case)
+        + f", slice ({fixed}); grey: falls\n"
+        f"converging area {b.area:.4g}, fraction {b.fraction:.3f}",
+        fontsize=9,
+    )
     ax.legend(loc="upper right", fontsize=8)
     fig.tight_layout()
     return _save(fig, path)
@@ -72,12 +88,16 @@ def plot_contraction(c, path=None, case=None):
     rho = float(c.spectral_radius)
     ref = np.median(d[:, 0]) * rho**k
     ax.semilogy(k, ref, "k--", lw=1.5, label=rf"$\rho^k$, $\rho$ = {rho:.4f} (multipliers)")
-    ax.semilogy([], [], color="C0", label=f"simulated recoveries (fitted rate "
-                f"{float(c.measured_rate):.4f})")
+    ax.semilogy(
+        [], [], color="C0", label=f"simulated recoveries (fitted rate {float(c.measured_rate):.4f})"
+    )
     ax.set_xlabel("step k")
     ax.set_ylabel(r"$\|x_k - x^*\|_\infty$ after impact")
-    ax.set_title(_case("Contraction", case) + f"\nerror /10 in {float(c.steps_10x):.2f} steps, /100 in "
-                 f"{float(c.steps_100x):.2f} (predicted)", fontsize=9)
+    ax.set_title(
+        _case("Contraction", case) + f"\nerror /10 in {float(c.steps_10x):.2f} steps, /100 in "
+        f"{float(c.steps_100x):.2f} (predicted)",
+        fontsize=9,
+    )
     ax.legend(fontsize=8)
     fig.tight_layout()
     return _save(fig, path)
@@ -132,8 +152,11 @@ def plot_push(phases, sens, angles, largest, path=None, unit="N s", p_max=None, 
         a2.axhline(p_max, color="k", lw=0.8, ls=":", label="search bound (survived beyond)")
     a2.set_xlabel("phase s of the push in the step")
     a2.set_ylabel(f"largest push survived ({unit})")
-    a2.set_title("Largest push after which the walker returns to the gait\n"
-                 "(0 deg = forward, 90 = up, 180 = backward, 270 = down)", fontsize=9)
+    a2.set_title(
+        "Largest push after which the walker returns to the gait\n"
+        "(0 deg = forward, 90 = up, 180 = backward, 270 = down)",
+        fontsize=9,
+    )
     a2.legend(fontsize=8)
     fig.suptitle(_case("Hip pushes along the step", case), fontsize=10)
     fig.tight_layout()
@@ -169,8 +192,11 @@ def plot_slope(sens, path=None, case=None):
         ax.set_ylabel(f"derivative ({unit})")
         ax.legend(fontsize=7, loc="best")
         ax.grid(alpha=0.3, axis="y")
-    fig.suptitle("Sensitivity of the gait to the slope, per degree (implicit "
-                 "differentiation)" + (f": {case}" if case else ""), fontsize=10)
+    fig.suptitle(
+        "Sensitivity of the gait to the slope, per degree (implicit "
+        "differentiation)" + (f": {case}" if case else ""),
+        fontsize=10,
+    )
     fig.tight_layout()
     if path is not None:
         fig.savefig(path)

@@ -11,8 +11,6 @@ import numpy as np
 from ._common import pyplot
 
 
-
-
 def _title(text, case):
     return f"{text}: {case}" if case else text
 
@@ -88,11 +86,20 @@ def plot_phase_portrait(sim, ax=None, path=None, case=None):
     for i in range(k):
         stance = i % 2 == 0  # the leg that is the stance leg in step 0
         j = 0 if stance else 1
-        ax.plot(x[i, :, j], x[i, :, j + 2], "C3" if stance else "C2",
-                label=("stance" if stance else "swing") if i < 2 else None)
+        ax.plot(
+            x[i, :, j],
+            x[i, :, j + 2],
+            "C3" if stance else "C2",
+            label=("stance" if stance else "swing") if i < 2 else None,
+        )
         if i + 1 < k:  # the impact: a jump in velocity at fixed angle
-            ax.plot([x[i, -1, j], x[i + 1, 0, 1 - j]], [x[i, -1, j + 2], x[i + 1, 0, 3 - j]],
-                    ":", color="0.5", lw=0.8)
+            ax.plot(
+                [x[i, -1, j], x[i + 1, 0, 1 - j]],
+                [x[i, -1, j + 2], x[i + 1, 0, 3 - j]],
+                ":",
+                color="0.5",
+                lw=0.8,
+            )
     ax.set_xlabel("leg angle (rad)")
     ax.set_ylabel("leg angular velocity (rad/s)")
     ax.set_title(_title("Phase portrait of one leg", case), fontsize=10)
@@ -122,8 +129,7 @@ def plot_step_periods(sim, ax=None, path=None, case=None):
         fig, ax = plt.subplots(figsize=(6, 3.5))
     else:
         fig = ax.figure
-    ax.plot(np.arange(1, k + 1), T, "o" if k <= 60 else ".", ms=4 if k <= 60 else 2.5,
-            ls="none")
+    ax.plot(np.arange(1, k + 1), T, "o" if k <= 60 else ".", ms=4 if k <= 60 else 2.5, ls="none")
     if k:
         mid, half = 0.5 * (T.max() + T.min()), 0.5 * (T.max() - T.min())
         half = max(1.1 * half, MIN_PERIOD_SPAN * abs(mid))
@@ -174,14 +180,15 @@ class _WalkerArtists:
         ax.plot(xs, -np.tan(psi) * xs, color="0.3", lw=1.5)  # the slope
         ax.fill_between(xs, -np.tan(psi) * xs, -np.tan(psi) * xs - 10.0 * l, color="0.85")
         (self.prints,) = ax.plot([], [], "v", color="0.4", ms=5)
-        (self.stance,) = ax.plot([], [], color="C3", lw=3, solid_capstyle="round",
-                                 label="stance leg")
-        (self.swing,) = ax.plot([], [], color="C2", lw=3, solid_capstyle="round",
-                                label="swing leg")
+        (self.stance,) = ax.plot(
+            [], [], color="C3", lw=3, solid_capstyle="round", label="stance leg"
+        )
+        (self.swing,) = ax.plot([], [], color="C2", lw=3, solid_capstyle="round", label="swing leg")
         (self.masses,) = ax.plot([], [], "o", color="k", ms=5)
         (self.hip,) = ax.plot([], [], "o", color="k", ms=12)
-        self.text = ax.text(0.02, 0.95, "", transform=ax.transAxes, va="top",
-                            family="monospace", fontsize=9)
+        self.text = ax.text(
+            0.02, 0.95, "", transform=ax.transAxes, va="top", family="monospace", fontsize=9
+        )
         ax.legend(loc="upper right", fontsize=8)
         ax.set_aspect("equal")
         # The window follows the hip: fixed tick positions would slide with it, so the
@@ -191,8 +198,9 @@ class _WalkerArtists:
         ax.set_xlabel(f"downhill; window 4 l wide (leg length l = {l:g} m)")
         # Footprints so far: the distinct stance-foot positions, in order.
         feet = frames["stance_foot"]
-        self.first_index = np.concatenate([[0], np.nonzero(np.any(np.diff(feet, axis=0) != 0,
-                                                                  axis=1))[0] + 1])
+        self.first_index = np.concatenate(
+            [[0], np.nonzero(np.any(np.diff(feet, axis=0) != 0, axis=1))[0] + 1]
+        )
 
     def update(self, i):
         f, l, psi = self.frames, self.l, self.psi
@@ -227,8 +235,9 @@ def plot_walker(sim, model, frame=0, ax=None, path=None):
         fig, ax = plt.subplots(figsize=(6, 3.2))
     else:
         fig = ax.figure
-    _WalkerArtists(ax, frames, float(model.psi), float(model.l), _TEXT,
-                             type(model).__name__).update(frame)
+    _WalkerArtists(
+        ax, frames, float(model.psi), float(model.l), _TEXT, type(model).__name__
+    ).update(frame)
     return _done(fig, path)
 
 
@@ -256,8 +265,9 @@ def animate(sim, model, path, *, fps=None, max_frames=300):
         duration = frames["t"][-1] - frames["t"][0]
         fps = max(1.0, min(50.0, len(idx) / max(duration, 1e-9)))
     fig, ax = plt.subplots(figsize=(6, 3.2), dpi=80)
-    artists = _WalkerArtists(ax, frames, float(model.psi), float(model.l), _TEXT,
-                             type(model).__name__)
+    artists = _WalkerArtists(
+        ax, frames, float(model.psi), float(model.l), _TEXT, type(model).__name__
+    )
 
     def update(j):
         artists.update(idx[j])
@@ -270,9 +280,13 @@ def animate(sim, model, path, *, fps=None, max_frames=300):
         # `buffer_rgba` is on every Agg-based canvas (the default one and the interactive
         # ones), not on the FigureCanvasBase that matplotlib's stubs give `fig.canvas`.
         rgba = fig.canvas.buffer_rgba()  # pyright: ignore[reportAttributeAccessIssue]  # Agg API
-        images.append(Image.fromarray(np.asarray(rgba)).convert(
-            "P", palette=Image.Palette.ADAPTIVE, colors=64))
+        images.append(
+            Image.fromarray(np.asarray(rgba)).convert(
+                "P", palette=Image.Palette.ADAPTIVE, colors=64
+            )
+        )
     plt.close(fig)
-    images[0].save(path, save_all=True, append_images=images[1:],
-                   duration=int(round(1000.0 / fps)), loop=0)
+    images[0].save(
+        path, save_all=True, append_images=images[1:], duration=int(round(1000.0 / fps)), loop=0
+    )
     return len(idx)

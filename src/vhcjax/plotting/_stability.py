@@ -9,8 +9,6 @@ import numpy as np
 from ._common import pyplot
 
 
-
-
 def plot_multipliers_complex(sets, labels=None, path=None, title=None):
     """Multipliers in the complex plane with the unit circle.
 
@@ -30,8 +28,14 @@ def plot_multipliers_complex(sets, labels=None, path=None, title=None):
         ev = np.atleast_1d(np.asarray(ev))
         rmax = max(rmax, float(np.max(np.abs(ev))))
         lab = None if labels is None else labels[i]
-        ax.plot(np.real(ev), np.imag(ev), markers[i % len(markers)], ms=8 if i == 0 else 10,
-                mfc="none" if i == 0 else None, label=lab)
+        ax.plot(
+            np.real(ev),
+            np.imag(ev),
+            markers[i % len(markers)],
+            ms=8 if i == 0 else 10,
+            mfc="none" if i == 0 else None,
+            label=lab,
+        )
     lim = 1.15 * rmax
     ax.set_xlim(-lim, lim)
     ax.set_ylim(-lim, lim)
@@ -60,14 +64,18 @@ def plot_multipliers_vs_slope(slopes_deg, families, path=None, case=None):
     for j, (name, ev) in enumerate(families.items()):
         ev = np.asarray(ev)
         for i in range(ev.shape[1]):
-            ax.plot(slopes_deg, np.abs(ev[:, i]), styles.get(i, "-"), color=colors[j % 4],
-                    label=f"{name} |$\\lambda_{i + 1}$|")
+            ax.plot(
+                slopes_deg,
+                np.abs(ev[:, i]),
+                styles.get(i, "-"),
+                color=colors[j % 4],
+                label=f"{name} |$\\lambda_{i + 1}$|",
+            )
     ax.axhline(1.0, color="k", lw=0.8)
     ax.set_yscale("log")
     ax.set_xlabel("slope (deg)")
     ax.set_ylabel("|multiplier|")
-    ax.set_title("Multipliers of the period-1 gaits" + (f": {case}" if case else ""),
-                 fontsize=10)
+    ax.set_title("Multipliers of the period-1 gaits" + (f": {case}" if case else ""), fontsize=10)
     ax.legend(fontsize=7, ncol=2)
     fig.tight_layout()
     if path:
@@ -85,8 +93,16 @@ def _branch(ax, x, y, stable, color, label):
         for i in range(1, len(x)):
             if stable[i] != stable[i - 1] and stable[i] == s:
                 yy[i - 1] = y[i - 1]
-        ax.plot(x, yy, "-" if s else "--", color=color, lw=1.2, alpha=0.75, zorder=2,
-                label=f"{label} ({'stable' if s else 'unstable'})" if first[s] else None)
+        ax.plot(
+            x,
+            yy,
+            "-" if s else "--",
+            color=color,
+            lw=1.2,
+            alpha=0.75,
+            zorder=2,
+            label=f"{label} ({'stable' if s else 'unstable'})" if first[s] else None,
+        )
         first[s] = False
 
 
@@ -109,8 +125,7 @@ def plot_bifurcation(diagram, branches=(), path=None, flips_deg=(), case=None):
     ax.plot([], [], ".", color="k", ms=5, label="simulation (last steps)")  # legend key
     if np.any(~ok):
         ymin = np.min(P[ok]) if np.any(ok) else 0.0
-        ax.plot(deg[~ok], np.full(np.sum(~ok), ymin - 0.01), "x", color="C3", ms=4,
-                label="fell")
+        ax.plot(deg[~ok], np.full(np.sum(~ok), ymin - 0.01), "x", color="C3", ms=4, label="fell")
     colors = ["C0", "C2", "C1", "C4"]
     for j, (label, sdeg, per, stable) in enumerate(branches):
         per = np.asarray(per)
@@ -121,8 +136,11 @@ def plot_bifurcation(diagram, branches=(), path=None, flips_deg=(), case=None):
         ax.axvline(f, color="0.6", lw=0.6, ls=":")
     ax.set_xlabel("slope (deg)")
     ax.set_ylabel("step period (s)")
-    ax.set_title("Compass gait: step periods after transients (Goswami et al. 1998)"
-                 + (f"\n{case}" if case else ""), fontsize=10)
+    ax.set_title(
+        "Compass gait: step periods after transients (Goswami et al. 1998)"
+        + (f"\n{case}" if case else ""),
+        fontsize=10,
+    )
     handles, labels = ax.get_legend_handles_labels()
     keep = [(h, lab) for h, lab in zip(handles, labels) if not lab.startswith("_")]
     ax.legend([h for h, _ in keep], [lab for _, lab in keep], fontsize=8, loc="upper left")

@@ -1,5 +1,4 @@
-"""The thesis chapter-7 report: every number recomputed and checked.
-"""
+"""The thesis chapter-7 report: every number recomputed and checked."""
 
 from ._report import (
     N_SECTIONS as N_SECTIONS,

@@ -29,11 +29,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..models import CompassGait
+from .._io import atomic_open
+from .._results import result_names
 from ..gait import Sweep, find_gaits
 from ..hybrid import DEFAULT_CONFIG, jacobian_jit, simulate, step_map_jit
-from .._io import atomic_open, save_figure
-from .._results import RESULTS, result_names
+from ..models import CompassGait
 from ..stability import (
     bifurcation_diagram,
     family_multipliers,
@@ -44,21 +44,50 @@ from ..stability import (
 # Thesis values, as printed (strings keep the number of digits), by equation number.
 # ---------------------------------------------------------------------------------------
 THESIS = {
-    "7.1": {"q1": "0.21689", "q2": "-0.31708", "dq1": "-1.08428", "dq2": "-0.39728",
-            "slope_deg": "2.87"},
-    "7.4": {"a": "0.218669", "b": "-1.092386", "c": "-0.323389", "d": "-1.494206",
-            "e": "-0.323389", "f": "-0.377377", "g": "0.218669", "h": "-1.805654"},
+    "7.1": {
+        "q1": "0.21689",
+        "q2": "-0.31708",
+        "dq1": "-1.08428",
+        "dq2": "-0.39728",
+        "slope_deg": "2.87",
+    },
+    "7.4": {
+        "a": "0.218669",
+        "b": "-1.092386",
+        "c": "-0.323389",
+        "d": "-1.494206",
+        "e": "-0.323389",
+        "f": "-0.377377",
+        "g": "0.218669",
+        "h": "-1.805654",
+    },
     "7.5": {"q1": "0.218669", "q2": "-0.323389", "dq1": "-1.092386", "dq2": "-0.377377"},
     "7.6": {"lambda1": "0.123", "re_lambda23": "0.127", "abs_im_lambda23": "0.586"},
     "T": {"T": "0.735"},  # "T ~ 0.735 seconds between each impact" (text below Fig 7.4)
     "7.7": {"q1": "0.228669", "q2": "-0.313389", "dq1": "-1.082386", "dq2": "-0.367377"},
     "conv": {"steps": "10", "seconds": "7"},  # "after approximately 10 steps / 7 seconds"
-    "7.9": {"a": "0.204676", "b": "-1.210571", "c": "-0.309396", "d": "-1.395725",
-            "e": "-0.309396", "f": "-0.712484", "g": "0.204676", "h": "-0.087282"},
+    "7.9": {
+        "a": "0.204676",
+        "b": "-1.210571",
+        "c": "-0.309396",
+        "d": "-1.395725",
+        "e": "-0.309396",
+        "f": "-0.712484",
+        "g": "0.204676",
+        "h": "-0.087282",
+    },
     "7.10": {"q1": "0.204676", "q2": "-0.309396", "dq1": "-1.210571", "dq2": "-0.712484"},
     "7.11": {"lambda1": "0.066", "lambda2": "0.408", "lambda3": "4.857"},
-    "7.13": {"a": "0.235356", "b": "-1.168938", "c": "-0.409888", "d": "-1.819906",
-             "e": "-0.409888", "f": "-0.047946", "g": "0.235356", "h": "-2.328662"},
+    "7.13": {
+        "a": "0.235356",
+        "b": "-1.168938",
+        "c": "-0.409888",
+        "d": "-1.819906",
+        "e": "-0.409888",
+        "f": "-0.047946",
+        "g": "0.235356",
+        "h": "-2.328662",
+    },
     "7.14": {"q1": "0.235356", "q2": "-0.409888", "dq1": "-1.168938", "dq2": "-0.047946"},
     "7.15": {"period": "4"},  # "a four-period asymmetric steady gait cycle"
     "7.16": {"lambda1": "0.092", "re_lambda23": "-0.346", "abs_im_lambda23": "0.429"},
@@ -121,17 +150,44 @@ def category(row):
 # Sizes
 # ---------------------------------------------------------------------------------------
 SIZES: dict[str, dict[str, Any]] = {
-    "quick": dict(sim_steps=24, dense=24, settle_rounds=3, sweep_n=8, sweep_range=(1.0, 6.0),
-                  bif_n=8,
-                  bif_range=(4.0, 5.4), bif_transient=40, bif_record=16, basin=(11, 11),
-                  basin_steps=30, basin_chunk=128, push_phases=4, push_angles=(0.0, 180.0),
-                  push_iterations=5, push_scan=4, pd_rounds=3),
-    "full": dict(sim_steps=40, dense=60, settle_rounds=10, sweep_n=64, sweep_range=(0.5, 6.0),
-                 bif_n=64,
-                 bif_range=(3.5, 5.5), bif_transient=300, bif_record=64, basin=(101, 101),
-                 basin_steps=50, basin_chunk=1024, push_phases=20,
-                 push_angles=(0.0, 90.0, 180.0, 270.0), push_iterations=12, push_scan=8,
-                 pd_rounds=6),
+    "quick": dict(
+        sim_steps=24,
+        dense=24,
+        settle_rounds=3,
+        sweep_n=8,
+        sweep_range=(1.0, 6.0),
+        bif_n=8,
+        bif_range=(4.0, 5.4),
+        bif_transient=40,
+        bif_record=16,
+        basin=(11, 11),
+        basin_steps=30,
+        basin_chunk=128,
+        push_phases=4,
+        push_angles=(0.0, 180.0),
+        push_iterations=5,
+        push_scan=4,
+        pd_rounds=3,
+    ),
+    "full": dict(
+        sim_steps=40,
+        dense=60,
+        settle_rounds=10,
+        sweep_n=64,
+        sweep_range=(0.5, 6.0),
+        bif_n=64,
+        bif_range=(3.5, 5.5),
+        bif_transient=300,
+        bif_record=64,
+        basin=(101, 101),
+        basin_steps=50,
+        basin_chunk=1024,
+        push_phases=20,
+        push_angles=(0.0, 90.0, 180.0, 270.0),
+        push_iterations=12,
+        push_scan=8,
+        pd_rounds=6,
+    ),
 }
 
 CHUNK = 8  # batch size of find_gaits / family_multipliers calls (one compile each)
@@ -184,7 +240,8 @@ def _family(slopes_deg, family, rounds=6):
         if not take.any():
             break
         g = jax.tree_util.tree_map(
-            lambda x, y: np.where(take.reshape((-1,) + (1,) * (x.ndim - 1)), y, x), g, g2)
+            lambda x, y: np.where(take.reshape((-1,) + (1,) * (x.ndim - 1)), y, x), g, g2
+        )
     return g
 
 
@@ -218,8 +275,12 @@ def _multipliers(slopes_deg, zs):
 
 def _sim(model, x0, sizes, dense=True):
     """One simulation shape for every section (one compile)."""
-    return _simulate_jit(model, jnp.asarray(x0, float), sizes["sim_steps"],
-                         dense_points=sizes["dense"] if dense else sizes["dense"])
+    return _simulate_jit(
+        model,
+        jnp.asarray(x0, float),
+        sizes["sim_steps"],
+        dense_points=sizes["dense"] if dense else sizes["dense"],
+    )
 
 
 def _sorted_ev(ev):
@@ -268,31 +329,64 @@ class Section:
         t = THESIS[eq][name]
         v = verdict(t, ours)
         diff = None if ours is None else float(ours) - float(t)
-        self.rows.append(dict(quantity=quantity, equation=eq, thesis=t,
-                              ours=None if ours is None else float(ours),
-                              difference=diff, verdict=v, cross_check=cross_check,
-                              digits=digits, known_wrong=eq in KNOWN_WRONG))
+        self.rows.append(
+            dict(
+                quantity=quantity,
+                equation=eq,
+                thesis=t,
+                ours=None if ours is None else float(ours),
+                difference=diff,
+                verdict=v,
+                cross_check=cross_check,
+                digits=digits,
+                known_wrong=eq in KNOWN_WRONG,
+            )
+        )
         return v
 
     def value(self, quantity, ours, cross_check, digits=8):
         """A row with no thesis value (a number the thesis does not print)."""
-        self.rows.append(dict(quantity=quantity, equation="", thesis="-",
-                              ours=None if ours is None else float(ours), difference=None,
-                              verdict="(no thesis value)", cross_check=cross_check,
-                              digits=digits, known_wrong=False))
+        self.rows.append(
+            dict(
+                quantity=quantity,
+                equation="",
+                thesis="-",
+                ours=None if ours is None else float(ours),
+                difference=None,
+                verdict="(no thesis value)",
+                cross_check=cross_check,
+                digits=digits,
+                known_wrong=False,
+            )
+        )
 
     def text(self, quantity, thesis, ours, verdict_text, cross_check):
-        self.rows.append(dict(quantity=quantity, equation="", thesis=thesis, ours=ours,
-                              difference=None, verdict=verdict_text,
-                              cross_check=cross_check, digits=0, known_wrong=False))
+        self.rows.append(
+            dict(
+                quantity=quantity,
+                equation="",
+                thesis=thesis,
+                ours=ours,
+                difference=None,
+                verdict=verdict_text,
+                cross_check=cross_check,
+                digits=0,
+                known_wrong=False,
+            )
+        )
 
     def markdown(self):
-        lines = [f"## {self.title}", "",
-                 "| quantity | thesis value | vhcjax value | difference | verdict | "
-                 "independent cross-check |", "|---|---|---|---|---|---|"]
+        lines = [
+            f"## {self.title}",
+            "",
+            "| quantity | thesis value | vhcjax value | difference | verdict | "
+            "independent cross-check |",
+            "|---|---|---|---|---|---|",
+        ]
         for r in self.rows:
-            q = r["quantity"] + (f" ({r['equation']})" if r["equation"] and
-                                 r["equation"][0].isdigit() else "")
+            q = r["quantity"] + (
+                f" ({r['equation']})" if r["equation"] and r["equation"][0].isdigit() else ""
+            )
             ours = r["ours"] if isinstance(r["ours"], str) else _fmt(r["ours"], r["digits"])
             d = "" if r["difference"] is None else f"{r['difference']:+.2e}"
             v = category(r)
@@ -309,8 +403,14 @@ class Section:
         return "\n".join(lines)
 
     def json(self):
-        return {"title": self.title, "rows": self.rows, "figures": self.figures,
-                "results": self.results, "seconds": self.seconds, "notes": self.notes}
+        return {
+            "title": self.title,
+            "rows": self.rows,
+            "figures": self.figures,
+            "results": self.results,
+            "seconds": self.seconds,
+            "notes": self.notes,
+        }
 
 
 def _close(fig):
@@ -321,8 +421,12 @@ def _close(fig):
 
 def _sim_figures(sim, out_dir, stem, sec, case):
     from .. import plotting as P
-    for kind, fn in (("states", P.plot_states), ("phase", P.plot_phase_portrait),
-                     ("periods", P.plot_step_periods)):
+
+    for kind, fn in (
+        ("states", P.plot_states),
+        ("phase", P.plot_phase_portrait),
+        ("periods", P.plot_step_periods),
+    ):
         name = f"{stem}_{kind}.png"
         fn(sim, path=os.path.join(out_dir, name), case=case)
         sec.figures.append(name)
@@ -334,21 +438,24 @@ def _five_figures(sims, out_dir, sec):
     from types import SimpleNamespace
 
     from .. import plotting as P
-    periods = np.concatenate([np.asarray(s.steps.period)[: int(s.num_successful)]
-                              for s in sims])
-    fake = SimpleNamespace(num_successful=len(periods),
-                           steps=SimpleNamespace(period=periods))
+
+    periods = np.concatenate([np.asarray(s.steps.period)[: int(s.num_successful)] for s in sims])
+    fake = SimpleNamespace(num_successful=len(periods), steps=SimpleNamespace(period=periods))
     name = "fig7_12_five_deg_periods.png"
     fig = P.plot_step_periods(
-        fake, case="stable family at 5 deg (unstable period 1), from (7.14); thesis Fig 7.12")
+        fake, case="stable family at 5 deg (unstable period 1), from (7.14); thesis Fig 7.12"
+    )
     fig.savefig(os.path.join(out_dir, name), dpi=120, bbox_inches="tight")
     _close(fig)
     sec.figures.append(name)
     for label, sim in (("start", sims[0]), ("attractor", sims[-1])):
         for kind, fn in (("states", P.plot_states), ("phase", P.plot_phase_portrait)):
             name = f"fig7_13_14_five_deg_{label}_{kind}.png"
-            fn(sim, path=os.path.join(out_dir, name),
-               case=f"5 deg, from (7.14), {'first steps' if label == 'start' else 'attractor'}")
+            fn(
+                sim,
+                path=os.path.join(out_dir, name),
+                case=f"5 deg, from (7.14), {'first steps' if label == 'start' else 'attractor'}",
+            )
             sec.figures.append(name)
 
 
@@ -377,8 +484,9 @@ def _return_check(g, mult, i):
 
 
 def _ev_check(mult, i):
-    return float(np.max(np.abs(_sorted_ev(mult["transverse"][i])
-                               - _sorted_ev(mult["poincare"][i]))))
+    return float(
+        np.max(np.abs(_sorted_ev(mult["transverse"][i]) - _sorted_ev(mult["poincare"][i])))
+    )
 
 
 # ---------------------------------------------------------------------------------------
@@ -411,11 +519,11 @@ def reproduce(out_dir, quick=False, progress=None):
     def gaits(sec):
         # stable family: 3 deg (7.4), 5 deg (7.13), 2.87 deg (7.1), 4.30 deg (flip bracket),
         # and the uphill seed (7.17) with the same (minus) root
-        st = _gaits([3.0, 5.0, 2.87, 4.3, 3.0], [GUESS, GUESS, GUESS, GUESS, (0.20, 1.0)],
-                    "stable")
+        st = _gaits([3.0, 5.0, 2.87, 4.3, 3.0], [GUESS, GUESS, GUESS, GUESS, (0.20, 1.0)], "stable")
         un = _gaits([3.0], [GUESS], "unstable")
         state["stable3"], state["stable5"], state["stable287"], state["stable43"] = (
-            _member(st, i) for i in range(4))
+            _member(st, i) for i in range(4)
+        )
         state["uphill"] = _member(st, 4)
         state["unstable3"] = _member(un, 0)
         slopes = [3.0, 3.0, 5.0, 2.87]
@@ -424,21 +532,32 @@ def reproduce(out_dir, quick=False, progress=None):
         state["mult"] = _multipliers(slopes, zs)
         state["mult_index"] = {k: i for i, k in enumerate(keys)}
         names = {k: result_names(state[k].result) for k in keys + ["uphill"]}
-        sec.results = {k: {p: float(getattr(state[k], p)) for p in
-                           ("a", "b", "c", "d", "e", "f", "g", "h", "T", "E0", "residual")}
-                       | {"result": names[k]} for k in keys + ["uphill"]}
+        sec.results = {
+            k: {
+                p: float(getattr(state[k], p))
+                for p in ("a", "b", "c", "d", "e", "f", "g", "h", "T", "E0", "residual")
+            }
+            | {"result": names[k]}
+            for k in keys + ["uphill"]
+        }
         for k in keys:
             i = state["mult_index"][k]
             dx, dT = _return_check(state[k], state["mult"], i)
             sec.results[k]["hybrid_step_x_minus_diff"] = dx
             sec.results[k]["hybrid_step_period_diff"] = dT
-        sec.text("search results", "-", ", ".join(f"{k}: {v}" for k, v in names.items()),
-                 "computed", "result codes per gait (uphill: infeasible_uphill expected)")
+        sec.text(
+            "search results",
+            "-",
+            ", ".join(f"{k}: {v}" for k, v in names.items()),
+            "computed",
+            "result codes per gait (uphill: infeasible_uphill expected)",
+        )
         sec.notes.append(
             "All gaits of this report come from one batched call of the VHC search "
             "(thesis Problem 1, `find_gaits`) from the thesis seed (7.2) a0 = 0.20, "
             "b0 = -1.0 (uphill: b0 = +1.0, 7.17), with the minus root of (5.13) (7.3) for "
-            "the stable family and the plus root (7.8) for the unstable one.")
+            "the stable family and the plus root (7.8) for the unstable one."
+        )
 
     # ---- 2: stable gait at 3 degrees (7.4), (7.5), period ----------------------------
     def stable3(sec):
@@ -447,15 +566,22 @@ def reproduce(out_dir, quick=False, progress=None):
         dx, dT = _return_check(g, state["mult"], i)
         check = f"hybrid step from (a,b,e,f) lands on (c,d,g,h) to {dx:.1e}"
         _gait_rows(sec, g, "7.4", "7.5", check)
-        sec.compare("step period T (s)", "T", "T", float(g.T),
-                    f"hybrid simulator period differs by {dT:.1e} s", digits=9)
+        sec.compare(
+            "step period T (s)",
+            "T",
+            "T",
+            float(g.T),
+            f"hybrid simulator period differs by {dT:.1e} s",
+            digits=9,
+        )
         sec.value("energy E0 (J)", float(g.E0), "energy of the post-impact state (5.10)")
         sec.value("step length (m)", float(g.step_length), "from the impact configuration")
         sec.value("speed (m/s)", float(g.speed), "step length / T")
         sec.notes.append(
             "The thesis's last digits of the velocities (b, d, f and especially h) are the "
             "inaccurate ones: it used fminsearch and ode45 with abstol 1e-6; ours solve the "
-            "VHC boundary problem to 1e-12 and are confirmed by the hybrid simulator.")
+            "VHC boundary problem to 1e-12 and are confirmed by the hybrid simulator."
+        )
 
     # ---- 3: eigenvalues (7.6) --------------------------------------------------------
     def eig3(sec):
@@ -470,20 +596,29 @@ def reproduce(out_dir, quick=False, progress=None):
         sec.compare("Re lambda2,3", "7.6", "re_lambda23", sp[1], check, 6)
         sec.compare("|Im lambda2,3|", "7.6", "abs_im_lambda23", sp[2], check, 6)
         sec.value("spectral radius", float(np.max(np.abs(tr))), check, 6)
-        sec.value("det Xi (ours) / thesis product 0.04422",
-                  float(np.prod(tr).real), "product of the thesis eigenvalues: 0.04422", 5)
+        sec.value(
+            "det Xi (ours) / thesis product 0.04422",
+            float(np.prod(tr).real),
+            "product of the thesis eigenvalues: 0.04422",
+            5,
+        )
         sec.results = {"transverse": _c(tr), "poincare": _c(pc), "max_diff": diff}
         state["diff_stable3"] = diff
-        _multiplier_figure([tr, pc, np.array([0.123, 0.127 - 0.586j, 0.127 + 0.586j])],
-                           ["transverse linearization", "Poincare (autodiff)", "thesis (7.6)"],
-                           out_dir, "fig7_1_multipliers_stable_3deg.png",
-                           "stable gait, 3 deg (thesis Fig 7.1)", sec)
+        _multiplier_figure(
+            [tr, pc, np.array([0.123, 0.127 - 0.586j, 0.127 + 0.586j])],
+            ["transverse linearization", "Poincare (autodiff)", "thesis (7.6)"],
+            out_dir,
+            "fig7_1_multipliers_stable_3deg.png",
+            "stable gait, 3 deg (thesis Fig 7.1)",
+            sec,
+        )
         sec.notes.append(
             "The thesis eigenvalues (7.6) differ from ours; our two independent computations "
             "(transverse linearization rebuilt from the VHC, and the Jacobian of the hybrid "
             "step map by forward-mode autodiff through the heel-strike event) agree, and "
             "the test suite also checks them against central finite differences of the step "
-            "map and a second Poincare section (docs/stability.md).")
+            "map and a second Poincare section (docs/stability.md)."
+        )
 
     # ---- 4: unperturbed and perturbed simulations (Figs 7.2-7.7, 7.7) -----------------
     def simulations(sec):
@@ -493,18 +628,31 @@ def reproduce(out_dir, quick=False, progress=None):
         sim = _sim(model, x_star, S)
         T = np.asarray(sim.steps.period)
         drift = float(np.max(np.abs(np.asarray(sim.steps.x_plus) - x_star)))
-        sec.value("steps simulated from the gait", int(sim.num_successful),
-                  f"result {result_names(sim.result)}", 4)
-        sec.value("max |x+ - x*| over all steps (rad, rad/s)", drift,
-                  "stays on the gait: the VHC gait is a fixed point of the simulator", 3)
-        sec.compare("step period (simulated, s)", "T", "T", float(np.mean(T)),
-                    f"spread over {len(T)} steps {np.ptp(T):.1e} s", 9)
+        sec.value(
+            "steps simulated from the gait",
+            int(sim.num_successful),
+            f"result {result_names(sim.result)}",
+            4,
+        )
+        sec.value(
+            "max |x+ - x*| over all steps (rad, rad/s)",
+            drift,
+            "stays on the gait: the VHC gait is a fixed point of the simulator",
+            3,
+        )
+        sec.compare(
+            "step period (simulated, s)",
+            "T",
+            "T",
+            float(np.mean(T)),
+            f"spread over {len(T)} steps {np.ptp(T):.1e} s",
+            9,
+        )
         _sim_figures(sim, out_dir, "fig7_2_4_stable_3deg", sec, "stable gait, 3 deg")
         # perturbed start (7.7): our gait + 0.01 on every component, as the thesis
         x_pert = x_star + 0.01
         for k, idx in (("q1", 0), ("q2", 1), ("dq1", 2), ("dq2", 3)):
-            sec.compare(f"perturbed {k}(0)", "7.7", k, float(x_pert[idx]),
-                        "our (7.5) + 0.01", 7)
+            sec.compare(f"perturbed {k}(0)", "7.7", k, float(x_pert[idx]), "our (7.5) + 0.01", 7)
         simp = _sim(model, x_pert, S)
         xp = np.asarray(simp.steps.x_plus)
         err = np.max(np.abs(xp - x_star), axis=1)
@@ -515,26 +663,49 @@ def reproduce(out_dir, quick=False, progress=None):
         # decay per step from the simulation vs the spectral radius
         rho = float(np.max(np.abs(state["mult"]["transverse"][0])))
         sel = [k for k in range(1, ok) if 1e-8 < err[k] < 1e-3]
-        rate = (float(np.exp(np.polyfit(sel, np.log(err[sel]), 1)[0]))
-                if len(sel) >= 4 else float("nan"))
-        check = (f"error decays by {rate:.3f} per step in the simulation; spectral radius "
-                 f"{rho:.3f}")
-        sec.compare(f"steps until within {tol:g} of the gait", "conv", "steps",
-                    None if conv is None else conv + 1, check, 3)
-        sec.compare("seconds until within 1e-3", "conv", "seconds",
-                    None if conv is None else float(t_imp[conv]), check, 3)
-        sec.value("final |x+ - x*| of the perturbed run", float(err[ok - 1]),
-                  f"{ok} steps, result {result_names(simp.result)}", 3)
-        sec.results = {"unperturbed_periods": T, "unperturbed_drift": drift,
-                       "perturbed_error": err, "perturbed_periods": np.asarray(
-                           simp.steps.period), "steps_to_1e-3": conv,
-                       "decay_rate_simulated": rate, "spectral_radius": rho}
-        _sim_figures(simp, out_dir, "fig7_5_7_perturbed_3deg", sec,
-                     "3 deg, perturbed start (7.7)")
+        rate = (
+            float(np.exp(np.polyfit(sel, np.log(err[sel]), 1)[0]))
+            if len(sel) >= 4
+            else float("nan")
+        )
+        check = f"error decays by {rate:.3f} per step in the simulation; spectral radius {rho:.3f}"
+        sec.compare(
+            f"steps until within {tol:g} of the gait",
+            "conv",
+            "steps",
+            None if conv is None else conv + 1,
+            check,
+            3,
+        )
+        sec.compare(
+            "seconds until within 1e-3",
+            "conv",
+            "seconds",
+            None if conv is None else float(t_imp[conv]),
+            check,
+            3,
+        )
+        sec.value(
+            "final |x+ - x*| of the perturbed run",
+            float(err[ok - 1]),
+            f"{ok} steps, result {result_names(simp.result)}",
+            3,
+        )
+        sec.results = {
+            "unperturbed_periods": T,
+            "unperturbed_drift": drift,
+            "perturbed_error": err,
+            "perturbed_periods": np.asarray(simp.steps.period),
+            "steps_to_1e-3": conv,
+            "decay_rate_simulated": rate,
+            "spectral_radius": rho,
+        }
+        _sim_figures(simp, out_dir, "fig7_5_7_perturbed_3deg", sec, "3 deg, perturbed start (7.7)")
         sec.notes.append(
-            "The thesis's convergence times (\"approximately 10 steps\", \"7 seconds\") do "
+            'The thesis\'s convergence times ("approximately 10 steps", "7 seconds") do '
             "not state a tolerance; ours use 1e-3 (max-norm of the post-impact state, a 10x "
-            "reduction of the 0.01 perturbation), so only the order of magnitude compares.")
+            "reduction of the 0.01 perturbation), so only the order of magnitude compares."
+        )
 
     # ---- 5: unstable gait at 3 degrees (7.9)-(7.11), Figs 7.8-7.11 ---------------------
     def unstable3(sec):
@@ -553,27 +724,39 @@ def reproduce(out_dir, quick=False, progress=None):
         err = np.max(np.abs(np.asarray(sim.steps.x_plus) - x_star), axis=1)
         ok = int(sim.num_successful)
         sel = [k for k in range(ok) if 1e-6 < err[k] < 1e-2]
-        growth = (float(np.exp(np.polyfit(sel, np.log(err[sel]), 1)[0]))
-                  if len(sel) >= 3 else float("nan"))
-        check = (f"transverse = Poincare to {diff:.1e}; simulated growth per step "
-                 f"{growth:.2f}")
+        growth = (
+            float(np.exp(np.polyfit(sel, np.log(err[sel]), 1)[0]))
+            if len(sel) >= 3
+            else float("nan")
+        )
+        check = f"transverse = Poincare to {diff:.1e}; simulated growth per step {growth:.2f}"
         for k, ev in zip(("lambda3", "lambda2", "lambda1"), tr):
             sec.compare(k, "7.11", k, float(ev.real), check, 6)
         state["growth_unstable"] = growth
-        sec.results = {"transverse": _c(tr), "poincare": _c(pc), "max_diff": diff,
-                       "simulated_growth_per_step": growth, "error": err,
-                       "result": result_names(sim.result)}
-        _multiplier_figure([tr, pc, np.array([0.066, 0.408, 4.857])],
-                           ["transverse linearization", "Poincare (autodiff)", "thesis (7.11)"],
-                           out_dir, "fig7_8_multipliers_unstable_3deg.png",
-                           "unstable gait, 3 deg (thesis Fig 7.8)", sec)
+        sec.results = {
+            "transverse": _c(tr),
+            "poincare": _c(pc),
+            "max_diff": diff,
+            "simulated_growth_per_step": growth,
+            "error": err,
+            "result": result_names(sim.result),
+        }
+        _multiplier_figure(
+            [tr, pc, np.array([0.066, 0.408, 4.857])],
+            ["transverse linearization", "Poincare (autodiff)", "thesis (7.11)"],
+            out_dir,
+            "fig7_8_multipliers_unstable_3deg.png",
+            "unstable gait, 3 deg (thesis Fig 7.8)",
+            sec,
+        )
         _sim_figures(sim, out_dir, "fig7_9_11_unstable_3deg", sec, "unstable gait, 3 deg")
         sec.notes.append(
             f"Simulated from the thesis's printed (7.10) (6 decimals, so ~1e-6 off the gait): "
             f"the error grows by about {growth:.2f} per step (our largest multiplier "
             f"{abs(tr[0]):.3f}, thesis 4.857) until the walker leaves the gait; "
             f"after {ok} steps: {result_names(sim.result)}, final distance to the unstable "
-            f"gait {err[ok - 1]:.2g}.")
+            f"gait {err[ok - 1]:.2g}."
+        )
 
     # ---- 6: 5 degrees (7.13)-(7.16), Figs 7.12-7.15 -----------------------------------
     def five(sec):
@@ -608,41 +791,64 @@ def reproduce(out_dir, quick=False, progress=None):
         z = np.asarray(model.state_to_section(jnp.asarray(x)))
         p4 = _period4(model, z)
         # cross-check: the hybrid simulator from the orbit's first point returns after 4
-        simc = _sim(model, np.asarray(model.section_to_state(jnp.asarray(p4["z"]))), S,
-                    dense=False)
+        simc = _sim(model, np.asarray(model.section_to_state(jnp.asarray(p4["z"]))), S, dense=False)
         zc = np.asarray(jax.vmap(model.state_to_section)(simc.steps.x_plus))
         ret = float(np.max(np.abs(zc[3] - p4["z"])))
         ret1 = float(np.max(np.abs(zc[0] - p4["z"])))
         minimal = 4 if ret1 > 1e-6 and float(np.max(np.abs(zc[1] - p4["z"]))) > 1e-6 else 0
-        sec.compare("minimal period of the attracting gait (steps)", "7.15", "period",
-                    minimal if p4["residual"] < 1e-9 else None,
-                    f"simulator returns after 4 steps to {ret:.1e}; not after 1 or 2 "
-                    f"({ret1:.1e})", 2)
+        sec.compare(
+            "minimal period of the attracting gait (steps)",
+            "7.15",
+            "period",
+            minimal if p4["residual"] < 1e-9 else None,
+            f"simulator returns after 4 steps to {ret:.1e}; not after 1 or 2 ({ret1:.1e})",
+            2,
+        )
         ev4 = p4["multipliers"]
         fd_diff = float(np.max(np.abs(ev4 - p4["multipliers_fd"])))
         for j, ev in enumerate(ev4):
-            sec.value(f"P^4 multiplier {j + 1} (Re)", float(ev.real),
-                      f"autodiff vs central finite differences {fd_diff:.1e}", 6)
+            sec.value(
+                f"P^4 multiplier {j + 1} (Re)",
+                float(ev.real),
+                f"autodiff vs central finite differences {fd_diff:.1e}",
+                6,
+            )
         for j, T in enumerate(p4["periods"]):
-            sec.value(f"period-4 gait step {j + 1} period (s)", float(T),
-                      "simulator step periods from the orbit point: "
-                      f"{float(np.asarray(simc.steps.period)[j]):.6f}", 7)
-        sec.results = {"transverse": _c(tr), "poincare": _c(pc), "max_diff": diff,
-                       "period4": {k: (_c(v) if k.startswith("multipliers") else v)
-                                   for k, v in p4.items()},
-                       "period4_return": ret}
+            sec.value(
+                f"period-4 gait step {j + 1} period (s)",
+                float(T),
+                "simulator step periods from the orbit point: "
+                f"{float(np.asarray(simc.steps.period)[j]):.6f}",
+                7,
+            )
+        sec.results = {
+            "transverse": _c(tr),
+            "poincare": _c(pc),
+            "max_diff": diff,
+            "period4": {k: (_c(v) if k.startswith("multipliers") else v) for k, v in p4.items()},
+            "period4_return": ret,
+        }
         _multiplier_figure(
             [tr, pc, ev4, np.array([0.092, -0.346 - 0.429j, -0.346 + 0.429j])],
-            ["period-1 gait: transverse", "period-1 gait: Poincare (autodiff)",
-             "period-4 gait: multipliers of P^4", "thesis (7.16)"],
-            out_dir, "fig7_15_multipliers_5deg.png", "5 deg (thesis Fig 7.15)", sec)
+            [
+                "period-1 gait: transverse",
+                "period-1 gait: Poincare (autodiff)",
+                "period-4 gait: multipliers of P^4",
+                "thesis (7.16)",
+            ],
+            out_dir,
+            "fig7_15_multipliers_5deg.png",
+            "5 deg (thesis Fig 7.15)",
+            sec,
+        )
         sec.notes.append(
             "(7.13)/(7.14) is the symmetric period-1 gait (c = e, g = a), our stable family "
             "at 5 deg, past the period-doubling slope: its multiplier below -1 makes it "
             "unstable (as the thesis's own Fig 7.12 shows: it leaves after a few impacts). "
             "The walker settles on a stable gait of minimal period 4 (found by Newton on "
             "P^4 from the settled simulation); the thesis's eigenvalues (7.16) belong to "
-            "neither.")
+            "neither."
+        )
 
     # ---- 7: uphill infeasible solution (7.17)-(7.18) ----------------------------------
     def uphill(sec):
@@ -650,14 +856,22 @@ def reproduce(out_dir, quick=False, progress=None):
         u = state["unstable3"]
         rev = float(np.max(np.abs(np.array([g.a - u.a, g.e - u.e, g.b + u.b, g.f + u.f]))))
         name = result_names(g.result)
-        sec.text("result code", "non-feasible", name,
-                 "agrees" if name == "infeasible_uphill" else "differs",
-                 f"residual {float(g.residual):.1e}")
+        sec.text(
+            "result code",
+            "non-feasible",
+            name,
+            "agrees" if name == "infeasible_uphill" else "differs",
+            f"residual {float(g.residual):.1e}",
+        )
         check = f"= unstable gait (7.10) with velocities reversed, to {rev:.1e}"
         for k, v in (("q1", g.a), ("q2", g.e), ("dq1", g.b), ("dq2", g.f)):
             sec.compare(f"{k}*(0)", "7.18", k, float(v), check, 7)
-        sec.results = {"result": name, "residual": float(g.residual),
-                       "z": np.asarray(g.z), "reversal_diff": rev}
+        sec.results = {
+            "result": name,
+            "residual": float(g.residual),
+            "z": np.asarray(g.z),
+            "reversal_diff": rev,
+        }
 
     # ---- 8: ref [5] gait at 2.87 deg (7.1) ---------------------------------------------
     def ref5(sec):
@@ -668,11 +882,17 @@ def reproduce(out_dir, quick=False, progress=None):
         for k, v in (("q1", g.a), ("q2", g.e), ("dq1", g.b), ("dq2", g.f)):
             sec.compare(f"{k}*(0)", "7.1", k, float(v), check, 7)
         tr = _sorted_ev(state["mult"]["transverse"][i])
-        sec.value("spectral radius", float(np.max(np.abs(tr))),
-                  f"transverse = Poincare to {_ev_check(state['mult'], i):.1e}", 5)
+        sec.value(
+            "spectral radius",
+            float(np.max(np.abs(tr))),
+            f"transverse = Poincare to {_ev_check(state['mult'], i):.1e}",
+            5,
+        )
         sec.results = {"z": np.asarray(g.z), "T": float(g.T), "multipliers": _c(tr)}
-        sec.notes.append("Ref. [5]'s values are printed to 5 decimals; the stable gait at "
-                         "2.87 deg (our VHC search from the thesis seed).")
+        sec.notes.append(
+            "Ref. [5]'s values are printed to 5 decimals; the stable gait at "
+            "2.87 deg (our VHC search from the thesis seed)."
+        )
 
     # ---- 9: slope sweeps of both families ---------------------------------------------
     def sweeps(sec):
@@ -682,50 +902,82 @@ def reproduce(out_dir, quick=False, progress=None):
         for fam in ("stable", "unstable"):
             g = _family(slopes, fam)
             ok = np.array(result_names(g.result)) == "successful"
-            sw[fam] = Sweep(jnp.radians(slopes), jax.tree_util.tree_map(
-                lambda x: jnp.asarray(x) if isinstance(x, np.ndarray) else x, g),
-                jnp.zeros((n, 3)))
+            sw[fam] = Sweep(
+                jnp.radians(slopes),
+                jax.tree_util.tree_map(
+                    lambda x: jnp.asarray(x) if isinstance(x, np.ndarray) else x, g
+                ),
+                jnp.zeros((n, 3)),
+            )
             z = np.asarray(g.z)
             mm = _multipliers(slopes, z)
             mults[fam] = (ok, mm)
             xm = np.max(np.abs(mm["x_minus"] - np.asarray(g.x_minus)), axis=1)
-            evd = np.max(np.abs(np.sort_complex(mm["transverse"])
-                                - np.sort_complex(mm["poincare"])), axis=1)
+            evd = np.max(
+                np.abs(np.sort_complex(mm["transverse"]) - np.sort_complex(mm["poincare"])), axis=1
+            )
             rho = np.max(np.abs(mm["transverse"]), axis=1)
-            sec.value(f"{fam} family: slopes found", int(ok.sum()),
-                      f"of {n} in {slopes[0]:g}..{slopes[-1]:g} deg; hybrid step lands on the "
-                      "VHC pre-impact state "
-                      f"to {np.max(xm[ok]):.1e}", 3)
-            sec.value(f"{fam} family: max |transverse - Poincare|", float(np.max(evd[ok])),
-                      "two independent multiplier computations at every slope", 2)
+            sec.value(
+                f"{fam} family: slopes found",
+                int(ok.sum()),
+                f"of {n} in {slopes[0]:g}..{slopes[-1]:g} deg; hybrid step lands on the "
+                "VHC pre-impact state "
+                f"to {np.max(xm[ok]):.1e}",
+                3,
+            )
+            sec.value(
+                f"{fam} family: max |transverse - Poincare|",
+                float(np.max(evd[ok])),
+                "two independent multiplier computations at every slope",
+                2,
+            )
             if fam == "unstable":
                 all_unstable = bool(np.all(rho[ok] > 1)) and ok.all()
-                sec.text(f"unstable family: exists and is unstable on [{slopes[0]:g}, 6] deg "
-                         "(thesis: (0, 6])", "yes",
-                         "yes" if all_unstable else "no",
-                         "agrees" if all_unstable else "differs",
-                         f"min spectral radius {np.min(rho[ok]):.3f} (> 1)")
+                sec.text(
+                    f"unstable family: exists and is unstable on [{slopes[0]:g}, 6] deg "
+                    "(thesis: (0, 6])",
+                    "yes",
+                    "yes" if all_unstable else "no",
+                    "agrees" if all_unstable else "differs",
+                    f"min spectral radius {np.min(rho[ok]):.3f} (> 1)",
+                )
             else:
                 st = rho < 1
                 last = slopes[ok & st].max() if np.any(ok & st) else float("nan")
-                sec.value("stable family: last stable slope on the grid (deg)", last,
-                          "see the period-doubling section for the exact slope", 4)
-            sec.results[fam] = {"slopes_deg": slopes, "ok": ok, "a": g.a, "b": g.b, "f": g.f,
-                                "T": g.T, "speed": g.speed, "spectral_radius": rho,
-                                "max_ev_diff": evd, "max_x_minus_diff": xm}
+                sec.value(
+                    "stable family: last stable slope on the grid (deg)",
+                    last,
+                    "see the period-doubling section for the exact slope",
+                    4,
+                )
+            sec.results[fam] = {
+                "slopes_deg": slopes,
+                "ok": ok,
+                "a": g.a,
+                "b": g.b,
+                "f": g.f,
+                "T": g.T,
+                "speed": g.speed,
+                "spectral_radius": rho,
+                "max_ev_diff": evd,
+                "max_x_minus_diff": xm,
+            }
         state["sweep_mults"] = mults
-        from ..plotting import plot_sweep
-        from ..plotting import plot_multipliers_vs_slope
+        from ..plotting import plot_multipliers_vs_slope, plot_sweep
 
-        fig = plot_sweep(sw, os.path.join(out_dir, "sweep_families.png"),
-                         case="default model (thesis Table 1)")
+        fig = plot_sweep(
+            sw, os.path.join(out_dir, "sweep_families.png"), case="default model (thesis Table 1)"
+        )
         _close(fig)
         sec.figures.append("sweep_families.png")
         fams = {f"{f} family": mults[f][1]["poincare"] for f in mults}
         okall = mults["stable"][0] & mults["unstable"][0]
-        fig = plot_multipliers_vs_slope(slopes[okall], {k: v[okall] for k, v in fams.items()},
-                                        os.path.join(out_dir, "multipliers_vs_slope.png"),
-                                        case="Poincare-map Jacobian, default model")
+        fig = plot_multipliers_vs_slope(
+            slopes[okall],
+            {k: v[okall] for k, v in fams.items()},
+            os.path.join(out_dir, "multipliers_vs_slope.png"),
+            case="Poincare-map Jacobian, default model",
+        )
         if fig is not None:
             _close(fig)
         sec.figures.append("multipliers_vs_slope.png")
@@ -754,10 +1006,16 @@ def reproduce(out_dir, quick=False, progress=None):
         pd = res["poincare"]
         state["pd_deg"] = pd
         d = abs(res["poincare"] - res["transverse"])
-        sec.compare("period-doubling slope (deg)", "pd", "slope_deg", pd,
-                    f"root of det(I+J) from the transverse multipliers: "
-                    f"{res['transverse']:.6f} (diff {d:.1e}); library "
-                    f"`period_doubling_slope` (tests): 4.390898", 7)
+        sec.compare(
+            "period-doubling slope (deg)",
+            "pd",
+            "slope_deg",
+            pd,
+            f"root of det(I+J) from the transverse multipliers: "
+            f"{res['transverse']:.6f} (diff {d:.1e}); library "
+            f"`period_doubling_slope` (tests): 4.390898",
+            7,
+        )
         w = res["poincare_bracket"][1] - res["poincare_bracket"][0]
         sec.value("bracket width (deg)", w, "regula falsi inside the last bracket", 2)
         sec.results = {k: v for k, v in res.items()}
@@ -769,18 +1027,24 @@ def reproduce(out_dir, quick=False, progress=None):
         g = _family(slopes, "stable")
         ok = np.array(result_names(g.result)) == "successful"
         mm = _multipliers(slopes, np.asarray(g.z))
-        diag = bifurcation_diagram(np.radians(slopes[ok]), np.asarray(g.z)[ok],
-                                   num_transient=S["bif_transient"],
-                                   num_record=S["bif_record"])
+        diag = bifurcation_diagram(
+            np.radians(slopes[ok]),
+            np.asarray(g.z)[ok],
+            num_transient=S["bif_transient"],
+            num_record=S["bif_record"],
+        )
         sim_pd = [math.degrees(p) for p in period_doubling_slopes_from_diagram(diag)]
         pd = state.get("pd_deg", float("nan"))
         stable1 = np.max(np.abs(mm["poincare"]), axis=1) < 1  # the verdict's method
         from ..plotting import plot_bifurcation
 
-        fig = plot_bifurcation(diag, [("period 1", slopes[ok], np.asarray(g.T)[ok],
-                                       stable1[ok])],
-                               os.path.join(out_dir, "bifurcation.png"), flips_deg=[pd],
-                               case="stable family, default model (thesis Table 1)")
+        fig = plot_bifurcation(
+            diag,
+            [("period 1", slopes[ok], np.asarray(g.T)[ok], stable1[ok])],
+            os.path.join(out_dir, "bifurcation.png"),
+            flips_deg=[pd],
+            case="stable family, default model (thesis Table 1)",
+        )
         _close(fig)
         sec.figures.append("bifurcation.png")
         pat = np.asarray(diag.period_pattern)
@@ -788,48 +1052,80 @@ def reproduce(out_dir, quick=False, progress=None):
         two = np.flatnonzero(pat >= 2)
         if len(two):  # the first simulated slope with a period-2 (or longer) pattern
             i2 = int(two[0])
-            before = (f"; previous slope {s_ok[i2 - 1]:.3f} deg has pattern {pat[i2 - 1]}"
-                      if i2 > 0 else "; it is the first slope simulated")
-            sec.value("first slope with period >= 2 in simulation (grid slope, deg)",
-                      float(s_ok[i2]), f"pattern {pat[i2]} there{before}; Newton/multiplier "
-                      f"period doubling {pd:.5f} deg; grid step "
-                      f"{slopes[1] - slopes[0]:.3f} deg", 4)
+            before = (
+                f"; previous slope {s_ok[i2 - 1]:.3f} deg has pattern {pat[i2 - 1]}"
+                if i2 > 0
+                else "; it is the first slope simulated"
+            )
+            sec.value(
+                "first slope with period >= 2 in simulation (grid slope, deg)",
+                float(s_ok[i2]),
+                f"pattern {pat[i2]} there{before}; Newton/multiplier "
+                f"period doubling {pd:.5f} deg; grid step "
+                f"{slopes[1] - slopes[0]:.3f} deg",
+                4,
+            )
         else:
-            sec.text("first slope with period >= 2 in simulation", "-",
-                     f"none in {s_ok[0]:.2f}-{s_ok[-1]:.2f} deg", "(no thesis value)",
-                     f"Newton/multiplier period doubling {pd:.5f} deg")
-        sec.value("slopes simulated / fell", int(ok.sum()), f"{int(np.sum(diag.fell))} fell",
-                  4)
-        sec.results = {"slopes_deg": slopes[ok], "pattern": pat, "fell": diag.fell,
-                       "period_doubling_simulation_deg": sim_pd,
-                       "periods": diag.periods}
+            sec.text(
+                "first slope with period >= 2 in simulation",
+                "-",
+                f"none in {s_ok[0]:.2f}-{s_ok[-1]:.2f} deg",
+                "(no thesis value)",
+                f"Newton/multiplier period doubling {pd:.5f} deg",
+            )
+        sec.value("slopes simulated / fell", int(ok.sum()), f"{int(np.sum(diag.fell))} fell", 4)
+        sec.results = {
+            "slopes_deg": slopes[ok],
+            "pattern": pat,
+            "fell": diag.fell,
+            "period_doubling_simulation_deg": sim_pd,
+            "periods": diag.periods,
+        }
         sec.notes.append(
             f"{S['bif_transient']} transient + {S['bif_record']} recorded steps per slope "
             "from the period-1 gait (+1e-4 rad/s on dq2), FAST_CONFIG. Period pattern per "
-            "slope: " + ", ".join(f"{s:.2f}:{p}" for s, p in zip(slopes[ok], pat)))
+            "slope: " + ", ".join(f"{s:.2f}:{p}" for s, p in zip(slopes[ok], pat))
+        )
 
     # ---- 12: basin slice --------------------------------------------------------------
     def basin(sec):
-        from ..robustness import basin_slice
         from ..plotting import plot_basin
+        from ..robustness import basin_slice
 
         model = _model(3.0)
         z = np.asarray(state["stable3"].z)
-        b = basin_slice(model, z, axes=(0, 1), half_widths=(0.08, 0.4), shape=S["basin"],
-                        num_steps=S["basin_steps"], chunk=S["basin_chunk"])
+        b = basin_slice(
+            model,
+            z,
+            axes=(0, 1),
+            half_widths=(0.08, 0.4),
+            shape=S["basin"],
+            num_steps=S["basin_steps"],
+            chunk=S["basin_chunk"],
+        )
         plot_basin(b, os.path.join(out_dir, "basin_q1_dq1.png"), case="stable gait, 3 deg")
         sec.figures.append("basin_q1_dq1.png")
-        counts = {n: int(np.sum(b.label == i)) for i, n in
-                  enumerate(("converged", "fell", "other_cycle", "undecided"))}
+        counts = {
+            n: int(np.sum(b.label == i))
+            for i, n in enumerate(("converged", "fell", "other_cycle", "undecided"))
+        }
         cy, cx = b.label.shape[0] // 2, b.label.shape[1] // 2
-        sec.value("converging fraction of the slice", b.fraction,
-                  f"grid {S['basin'][0]}x{S['basin'][1]}; the gait itself (grid centre) "
-                  f"converges: {bool(b.label[cy, cx] == 0)}", 4)
+        sec.value(
+            "converging fraction of the slice",
+            b.fraction,
+            f"grid {S['basin'][0]}x{S['basin'][1]}; the gait itself (grid centre) "
+            f"converges: {bool(b.label[cy, cx] == 0)}",
+            4,
+        )
         sec.value("converging area (rad^2/s)", b.area, f"counts {counts}", 4)
         for k, v in b.max_converging.items():
             sec.value(f"largest converging offset {k}", v, "along the grid line", 3)
-        sec.results = {"fraction": b.fraction, "area": b.area, "counts": counts,
-                       "max_converging": b.max_converging}
+        sec.results = {
+            "fraction": b.fraction,
+            "area": b.area,
+            "counts": counts,
+            "max_converging": b.max_converging,
+        }
 
     # ---- 13: push sensitivity ---------------------------------------------------------
     def push(sec):
@@ -843,29 +1139,59 @@ def reproduce(out_dir, quick=False, progress=None):
         phases = np.arange(S["push_phases"]) / S["push_phases"]
         angles = np.radians(np.asarray(S["push_angles"]))
         D = np.asarray(push_sensitivity_autodiff(model, x_star, T, jnp.asarray(phases)))
-        res = max_push(model, x_star, T, phases, angles, p_max=20.0,
-                       iterations=S["push_iterations"], scan=S["push_scan"])
-        plot_push(phases, D, angles, res.largest, os.path.join(out_dir, "push.png"),
-                  p_max=20.0, case="stable gait, 3 deg")
+        res = max_push(
+            model,
+            x_star,
+            T,
+            phases,
+            angles,
+            p_max=20.0,
+            iterations=S["push_iterations"],
+            scan=S["push_scan"],
+        )
+        plot_push(
+            phases,
+            D,
+            angles,
+            res.largest,
+            os.path.join(out_dir, "push.png"),
+            p_max=20.0,
+            case="stable gait, 3 deg",
+        )
         sec.figures.append("push.png")
         j = int(np.argmin(np.where(np.isfinite(res.largest), res.largest, np.inf)))
         s, a = np.unravel_index(j, res.largest.shape)
-        sec.value("smallest largest-survived impulse (N s)", float(res.largest[s, a]),
-                  f"at phase {phases[s]:.2f}, direction {np.degrees(angles[a]):.0f} deg; "
-                  f"bracket [{float(res.threshold.lo.reshape(res.largest.shape)[s, a]):.3g}, "
-                  f"{float(res.threshold.hi.reshape(res.largest.shape)[s, a]):.3g}] "
-                  "(lower end survives, upper end falls)", 3)
-        sec.value("max |dx+/dP| (per N s)", float(np.max(np.linalg.norm(D, axis=1))),
-                  "autodiff; = transverse linearization with input term in the tests", 3)
-        sec.results = {"phases": phases, "angles_deg": np.degrees(angles),
-                       "largest": res.largest, "sensitivity": D}
+        sec.value(
+            "smallest largest-survived impulse (N s)",
+            float(res.largest[s, a]),
+            f"at phase {phases[s]:.2f}, direction {np.degrees(angles[a]):.0f} deg; "
+            f"bracket [{float(res.threshold.lo.reshape(res.largest.shape)[s, a]):.3g}, "
+            f"{float(res.threshold.hi.reshape(res.largest.shape)[s, a]):.3g}] "
+            "(lower end survives, upper end falls)",
+            3,
+        )
+        sec.value(
+            "max |dx+/dP| (per N s)",
+            float(np.max(np.linalg.norm(D, axis=1))),
+            "autodiff; = transverse linearization with input term in the tests",
+            3,
+        )
+        sec.results = {
+            "phases": phases,
+            "angles_deg": np.degrees(angles),
+            "largest": res.largest,
+            "sensitivity": D,
+        }
 
     steps = [
         ("gaits", "Gait search (Problem 1) for every gait of chapter 7", gaits),
         ("stable3", "Stable gait at 3 deg: (7.4), (7.5), step period", stable3),
         ("eig3", "Eigenvalues of the stable gait (7.6), Fig 7.1", eig3),
-        ("sims", "Simulations of the stable gait, unperturbed and perturbed (7.7), "
-                 "Figs 7.2-7.7", simulations),
+        (
+            "sims",
+            "Simulations of the stable gait, unperturbed and perturbed (7.7), Figs 7.2-7.7",
+            simulations,
+        ),
         ("unstable3", "Unstable gait at 3 deg: (7.9)-(7.11), Figs 7.8-7.11", unstable3),
         ("five", "5 deg: (7.13)-(7.16), Figs 7.12-7.15", five),
         ("uphill", "Uphill non-feasible solution (7.17)-(7.18)", uphill),
@@ -915,11 +1241,16 @@ def _period4(model, z, k=4, iterations=20, h=1e-6):
     zk, J, periods = Pk(z, True)
     res = float(np.max(np.abs(zk - z)))
     eye = np.eye(len(z))
-    Jfd = np.stack([(Pk(z + h * e, False)[0] - Pk(z - h * e, False)[0]) / (2 * h)
-                    for e in eye], axis=1)
-    return {"z": z, "periods": np.asarray(periods), "residual": res,
-            "multipliers": _sorted_ev(np.linalg.eigvals(J)),
-            "multipliers_fd": _sorted_ev(np.linalg.eigvals(Jfd))}
+    Jfd = np.stack(
+        [(Pk(z + h * e, False)[0] - Pk(z - h * e, False)[0]) / (2 * h) for e in eye], axis=1
+    )
+    return {
+        "z": z,
+        "periods": np.asarray(periods),
+        "residual": res,
+        "multipliers": _sorted_ev(np.linalg.eigvals(J)),
+        "multipliers_fd": _sorted_ev(np.linalg.eigvals(Jfd)),
+    }
 
 
 def _write(out_dir, sections, mode, total):
@@ -937,33 +1268,49 @@ def _write(out_dir, sections, mode, total):
             r["category"] = category(r)
             if r["thesis"] not in ("-",):
                 counts[category(r)] = counts.get(category(r), 0) + 1
-    head = [
-        "# vhcjax reproduction of thesis chapter 7", "",
-        f"- mode: {mode}", f"- vhcjax {version}, jax {jax.__version__}, "
-        f"python {platform.python_version()}", f"- device: {device}",
-        f"- total run time: {total:.1f} s", "",
-        "Verdicts are computed by the digit rule: *agrees* when |vhcjax - thesis| is at most "
-        "half a unit of the thesis's last printed digit, *last digit off* within 1.5 units, "
-        "*differs* otherwise. Thesis values known to be wrong (the eigenvalues 7.6, 7.11, "
-        "7.16) are marked; the cross-check column shows our two independent computations "
-        "agreeing with each other.", "",
-        "Verdict counts: " + ", ".join(f"{k}: {v}" for k, v in sorted(counts.items())), "",
-        f"(*{SMALL_DIFF}*: the digit rule says *differs*, but by at most "
-        f"{SMALL_DIFF_LIMIT:g}: the thesis's fminsearch/ode45 (abstol 1e-6) accuracy, "
-        f"mostly velocities at the 6th decimal. *{THESIS_WRONG}*: the thesis prints a wrong "
-        "value; our two independent computations agree with each other.)", "",
-        "| section | run time (s) |", "|---|---|",
-    ] + [f"| {s.title} | {s.seconds:.1f} |" for s in sections] + [
-        f"| **total** | **{total:.1f}** |", ""]
+    head = (
+        [
+            "# vhcjax reproduction of thesis chapter 7",
+            "",
+            f"- mode: {mode}",
+            f"- vhcjax {version}, jax {jax.__version__}, python {platform.python_version()}",
+            f"- device: {device}",
+            f"- total run time: {total:.1f} s",
+            "",
+            "Verdicts are computed by the digit rule: *agrees* when |vhcjax - thesis| is at most "
+            "half a unit of the thesis's last printed digit, *last digit off* within 1.5 units, "
+            "*differs* otherwise. Thesis values known to be wrong (the eigenvalues 7.6, 7.11, "
+            "7.16) are marked; the cross-check column shows our two independent computations "
+            "agreeing with each other.",
+            "",
+            "Verdict counts: " + ", ".join(f"{k}: {v}" for k, v in sorted(counts.items())),
+            "",
+            f"(*{SMALL_DIFF}*: the digit rule says *differs*, but by at most "
+            f"{SMALL_DIFF_LIMIT:g}: the thesis's fminsearch/ode45 (abstol 1e-6) accuracy, "
+            f"mostly velocities at the 6th decimal. *{THESIS_WRONG}*: the thesis prints a wrong "
+            "value; our two independent computations agree with each other.)",
+            "",
+            "| section | run time (s) |",
+            "|---|---|",
+        ]
+        + [f"| {s.title} | {s.seconds:.1f} |" for s in sections]
+        + [f"| **total** | **{total:.1f}** |", ""]
+    )
     body = [s.markdown() for s in sections]
     # Complete or absent: an interrupted run leaves no report that looks finished.
     with atomic_open(os.path.join(out_dir, "report.md"), "w") as f:
         f.write("\n".join(head + body))
     from .._json import to_jsonable
 
-    results = {"mode": mode, "version": version, "jax": jax.__version__, "device": device,
-               "total_seconds": total, "verdict_counts": counts,
-               "sections": {s.key: s.json() for s in sections}}
+    results = {
+        "mode": mode,
+        "version": version,
+        "jax": jax.__version__,
+        "device": device,
+        "total_seconds": total,
+        "verdict_counts": counts,
+        "sections": {s.key: s.json() for s in sections},
+    }
     results = to_jsonable(results)
     with atomic_open(os.path.join(out_dir, "results.json"), "w") as f:
         json.dump(results, f, indent=1, default=_json_default, allow_nan=False)

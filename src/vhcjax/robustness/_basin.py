@@ -17,10 +17,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._bisection import bisect_threshold
-from ..hybrid import FAST_CONFIG
-from ._recovery import CONVERGED, recover
 from .._batching import host_workers, map_in_order, round_to_devices, shard_batch
+from ..hybrid import FAST_CONFIG
+from ._bisection import bisect_threshold
+from ._recovery import CONVERGED, recover
 
 SECTION_NAMES = ("q1", "dq1", "dq2")
 BASIN_CONFIG = FAST_CONFIG
@@ -33,8 +33,18 @@ def _recover_chunk(model, z, z_star, num_steps, tol, config):
     return recover(model, x0, model.section_to_state(z_star), num_steps, tol=tol, config=config)
 
 
-def classify_section_points(model, z_star, z, *, num_steps=50, tol=1e-4, chunk=1024,
-                            config=BASIN_CONFIG, progress=None, mesh=None):
+def classify_section_points(
+    model,
+    z_star,
+    z,
+    *,
+    num_steps=50,
+    tol=1e-4,
+    chunk=1024,
+    config=BASIN_CONFIG,
+    progress=None,
+    mesh=None,
+):
     """Classify section points `z` (shape `(N, 2n-1)`) by their fate (host loop over
     chunks; on a CPU one chunk per core at a time, see `_sharding.host_workers`).
 
@@ -55,14 +65,18 @@ def classify_section_points(model, z_star, z, *, num_steps=50, tol=1e-4, chunk=1
         pad = chunk - part.shape[0]
         if pad:
             part = np.concatenate([part, np.repeat(np.asarray(z_star)[None], pad, 0)])
-        rec = _recover_chunk(model, shard_batch(jnp.asarray(part), mesh), jnp.asarray(z_star),
-                             num_steps, tol, config)
+        rec = _recover_chunk(
+            model, shard_batch(jnp.asarray(part), mesh), jnp.asarray(z_star), num_steps, tol, config
+        )
         keep = chunk - pad
         zf = jax.vmap(model.state_to_section)(rec.x_final)
-        return {"label": np.asarray(rec.label)[:keep], "steps": np.asarray(rec.steps)[:keep],
-                "period": np.asarray(rec.period)[:keep],
-                "result": np.asarray(rec.result._value)[:keep],
-                "z_final": np.asarray(zf)[:keep]}
+        return {
+            "label": np.asarray(rec.label)[:keep],
+            "steps": np.asarray(rec.steps)[:keep],
+            "period": np.asarray(rec.period)[:keep],
+            "result": np.asarray(rec.result._value)[:keep],
+            "z_final": np.asarray(zf)[:keep],
+        }
 
     # On a CPU, one chunk per core at a time (XLA runs a program on one core); in order.
     parts = map_in_order(run, range(0, n, chunk), host_workers(mesh), progress)
@@ -111,9 +125,20 @@ def _reach(ok_line, offsets, sign):
     return best
 
 
-def basin_slice(model, z_star, *, axes=(0, 1), half_widths=(0.1, 0.4), shape=(200, 200),
-                num_steps=50, tol=1e-4, chunk=1024, config=BASIN_CONFIG, progress=None,
-                mesh=None):
+def basin_slice(
+    model,
+    z_star,
+    *,
+    axes=(0, 1),
+    half_widths=(0.1, 0.4),
+    shape=(200, 200),
+    num_steps=50,
+    tol=1e-4,
+    chunk=1024,
+    config=BASIN_CONFIG,
+    progress=None,
+    mesh=None,
+):
     """Classify a `shape = (nx, ny)` grid of perturbations of `z_star` along two section
     coordinates (`axes`), the others nominal.
 
@@ -141,27 +166,56 @@ def basin_slice(model, z_star, *, axes=(0, 1), half_widths=(0.1, 0.4), shape=(20
     z = np.repeat(z_star[None], gx.size, 0)
     z[:, axes[0]] += gx.ravel()
     z[:, axes[1]] += gy.ravel()
-    out = classify_section_points(model, z_star, z, num_steps=num_steps, tol=tol,
-                                  chunk=chunk, config=config, progress=progress, mesh=mesh)
+    out = classify_section_points(
+        model,
+        z_star,
+        z,
+        num_steps=num_steps,
+        tol=tol,
+        chunk=chunk,
+        config=config,
+        progress=progress,
+        mesh=mesh,
+    )
     label = out["label"].reshape(ny, nx)
     conv = label == CONVERGED
     cell = (ox[1] - ox[0]) * (oy[1] - oy[0]) if nx > 1 and ny > 1 else 0.0
     iy0, ix0 = int(np.argmin(np.abs(oy))), int(np.argmin(np.abs(ox)))
     reach = {
-        "+x": _reach(conv[iy0, :], ox, +1), "-x": _reach(conv[iy0, :], ox, -1),
-        "+y": _reach(conv[:, ix0], oy, +1), "-y": _reach(conv[:, ix0], oy, -1),
+        "+x": _reach(conv[iy0, :], ox, +1),
+        "-x": _reach(conv[iy0, :], ox, -1),
+        "+y": _reach(conv[:, ix0], oy, +1),
+        "-y": _reach(conv[:, ix0], oy, -1),
     }
     return BasinSlice(
-        axes=tuple(axes), offsets_x=ox, offsets_y=oy, z_star=z_star, label=label,
-        steps=out["steps"].reshape(ny, nx), result=out["result"].reshape(ny, nx),
-        area=float(conv.sum() * cell), fraction=float(conv.mean()), max_converging=reach,
-        num_steps=num_steps, tol=tol,
+        axes=tuple(axes),
+        offsets_x=ox,
+        offsets_y=oy,
+        z_star=z_star,
+        label=label,
+        steps=out["steps"].reshape(ny, nx),
+        result=out["result"].reshape(ny, nx),
+        area=float(conv.sum() * cell),
+        fraction=float(conv.mean()),
+        max_converging=reach,
+        num_steps=num_steps,
+        tol=tol,
     )
 
 
-def max_converging_perturbation(model, z_star, directions, r_max, *, iterations=16,
-                                num_steps=50, tol=1e-4, scan=16, config=BASIN_CONFIG,
-                                progress=None):
+def max_converging_perturbation(
+    model,
+    z_star,
+    directions,
+    r_max,
+    *,
+    iterations=16,
+    num_steps=50,
+    tol=1e-4,
+    scan=16,
+    config=BASIN_CONFIG,
+    progress=None,
+):
     """Largest perturbation $r$ along each unit `direction` (rows, section coordinates)
     for which $z^* + r d$ still converges to the gait, by batched bisection on
     $[0, r_{max}]$.
@@ -176,8 +230,14 @@ def max_converging_perturbation(model, z_star, directions, r_max, *, iterations=
         rec = _recover_chunk(model, z, z_star, num_steps, tol, config)
         return rec.label == CONVERGED
 
-    return bisect_threshold(survives, np.zeros(d.shape[0]), np.broadcast_to(r_max, d.shape[0]),
-                            iterations=iterations, scan=scan, progress=progress)
+    return bisect_threshold(
+        survives,
+        np.zeros(d.shape[0]),
+        np.broadcast_to(r_max, d.shape[0]),
+        iterations=iterations,
+        scan=scan,
+        progress=progress,
+    )
 
 
 def axis_directions(n):
@@ -223,9 +283,21 @@ class BasinVolume(eqx.Module):
     confidence: float
 
 
-def basin_volume(model, z_star, half_widths, *, num_samples=4096, key=None, num_steps=50,
-                 tol=1e-4, chunk=1024, config=BASIN_CONFIG, confidence=0.95, progress=None,
-                 mesh=None):
+def basin_volume(
+    model,
+    z_star,
+    half_widths,
+    *,
+    num_samples=4096,
+    key=None,
+    num_steps=50,
+    tol=1e-4,
+    chunk=1024,
+    config=BASIN_CONFIG,
+    confidence=0.95,
+    progress=None,
+    mesh=None,
+):
     """Monte-Carlo estimate (uniform samples) of the fraction of the box
     `z_star +- half_widths` in the full section that converges to the gait, with a Wilson
     confidence interval.
@@ -239,11 +311,28 @@ def basin_volume(model, z_star, half_widths, *, num_samples=4096, key=None, num_
     key = jax.random.PRNGKey(0) if key is None else key
     u = np.asarray(jax.random.uniform(key, (num_samples, z_star.shape[0]), minval=-1, maxval=1))
     z = z_star[None] + u * hw[None]
-    out = classify_section_points(model, z_star, z, num_steps=num_steps, tol=tol, chunk=chunk,
-                                  config=config, progress=progress, mesh=mesh)
+    out = classify_section_points(
+        model,
+        z_star,
+        z,
+        num_steps=num_steps,
+        tol=tol,
+        chunk=chunk,
+        config=config,
+        progress=progress,
+        mesh=mesh,
+    )
     k = int(np.sum(out["label"] == CONVERGED))
     lo, hi = wilson_interval(k, num_samples, confidence)
     box = float(np.prod(2 * hw))
     counts = {name: int(np.sum(out["label"] == i)) for i, name in enumerate(LABEL_NAMES)}
-    return BasinVolume(k / num_samples, (lo, hi), k / num_samples * box, (lo * box, hi * box),
-                       hw, num_samples, counts, confidence)
+    return BasinVolume(
+        k / num_samples,
+        (lo, hi),
+        k / num_samples * box,
+        (lo * box, hi * box),
+        hw,
+        num_samples,
+        counts,
+        confidence,
+    )

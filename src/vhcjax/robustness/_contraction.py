@@ -14,8 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..hybrid import DEFAULT_CONFIG
-from ..hybrid import jacobian
+from ..hybrid import DEFAULT_CONFIG, jacobian
 from ._recovery import recover
 
 
@@ -49,8 +48,7 @@ def steps_to_shrink(rho, factor):
     """Steps for an error to shrink by `factor` (e.g. 10) at rate `rho`:
     $\\log(1/\\text{factor})/\\log\\rho$ (inf if $\\rho \\ge 1$)."""
     rho = jnp.asarray(rho)
-    return jnp.where(rho < 1, jnp.log(1.0 / factor) / jnp.log(jnp.minimum(rho, 1 - 1e-16)),
-                     jnp.inf)
+    return jnp.where(rho < 1, jnp.log(1.0 / factor) / jnp.log(jnp.minimum(rho, 1 - 1e-16)), jnp.inf)
 
 
 def _fit_rate(dist, k0, k1):
@@ -68,8 +66,17 @@ def _first_below(dist, factor):
     return np.where(below.any(axis=1), below.argmax(axis=1) + 1, -1)
 
 
-def contraction(model, z_star, *, num_perturbations=32, scale=1e-3, num_steps=30,
-                fit_window=(6, 30), key=None, config=DEFAULT_CONFIG):
+def contraction(
+    model,
+    z_star,
+    *,
+    num_perturbations=32,
+    scale=1e-3,
+    num_steps=30,
+    fit_window=(6, 30),
+    key=None,
+    config=DEFAULT_CONFIG,
+):
     """Predicted and measured speed of contraction to the gait through `z_star`.
 
     **Arguments:**
@@ -111,8 +118,7 @@ def contraction(model, z_star, *, num_perturbations=32, scale=1e-3, num_steps=30
         measured_rate=jnp.asarray(np.median(rates)),
         measured_rates=jnp.asarray(rates),
         measured_steps_10x=jnp.asarray(np.median(m10[m10 > 0]) if np.any(m10 > 0) else np.nan),
-        measured_steps_100x=jnp.asarray(
-            np.median(m100[m100 > 0]) if np.any(m100 > 0) else np.nan),
+        measured_steps_100x=jnp.asarray(np.median(m100[m100 > 0]) if np.any(m100 > 0) else np.nan),
         distance=rec.distance,
         fit_window=(k0, k1),
     )
@@ -126,5 +132,4 @@ def _jacobian_jit(model, z, config):
 @eqx.filter_jit
 def _recover_jit(model, x0, x_star, num_steps, config):
     # tol=0: nobody "converges", every recovery runs all steps (a full error history).
-    return recover(model, x0, x_star, num_steps, tol=0.0, config=config,
-                   stop_when_converged=False)
+    return recover(model, x0, x_star, num_steps, tol=0.0, config=config, stop_when_converged=False)

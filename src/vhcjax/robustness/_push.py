@@ -28,10 +28,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._bisection import bisect_threshold, Threshold
-from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, StepResult, classify_solve, flow
-from ._recovery import CONVERGED, recover
 from .._results import RESULTS
+from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, StepResult, classify_solve, flow
+from ._bisection import Threshold, bisect_threshold
+from ._recovery import CONVERGED, recover
 
 
 def hip_jacobian(model, q):
@@ -55,15 +55,28 @@ def swing_from(model, x, t0, t_max, config, vector_field=None):
     if it is already open at `x`, look for the strike at once)."""
     n = model.n_dof
     open0 = model.strike_gate(x[:n]) > 0
-    sol1 = flow(model, x, jnp.where(open0, t0 + 1e-9, t_max), config, gate=True, t0=t0,
-                vector_field=vector_field)
+    sol1 = flow(
+        model,
+        x,
+        jnp.where(open0, t0 + 1e-9, t_max),
+        config,
+        gate=True,
+        t0=t0,
+        vector_field=vector_field,
+    )
     code1 = classify_solve(sol1)
     opened = open0 | (code1 == RESULTS.successful)
     assert sol1.ys is not None and sol1.ts is not None  # flow saves at t1
     x_mid = jnp.where(open0, x, sol1.ys[-1])
     t_mid = jnp.where(open0, t0, sol1.ts[-1])
-    sol2 = flow(model, x_mid, jnp.where(opened, t_max, t_mid + 1e-9), config, t0=t_mid,
-                vector_field=vector_field)
+    sol2 = flow(
+        model,
+        x_mid,
+        jnp.where(opened, t_max, t_mid + 1e-9),
+        config,
+        t0=t_mid,
+        vector_field=vector_field,
+    )
     code = RESULTS.where(opened, classify_solve(sol2), code1)
     assert sol2.ys is not None and sol2.ts is not None  # flow saves at t1
     x_minus = jnp.where(opened, sol2.ys[-1], sol1.ys[-1])
@@ -92,9 +105,10 @@ def _pushed_step(model, x0, t_push, kick, config, alive):
     assert sol0.ys is not None  # flow saves at t1
     xs = sol0.ys[-1]
     x_k, t_k = kick(xs, t_s)
-    bad = (model.fallen(xs[:n]) | model.fallen(x_k[:n]) | ~jnp.all(jnp.isfinite(x_k)))
-    x_minus, t_end, code = swing_from(model, x_k, jnp.where(alive, t_k, 1e-12),
-                                       jnp.where(alive, t_max, 2e-12), config)
+    bad = model.fallen(xs[:n]) | model.fallen(x_k[:n]) | ~jnp.all(jnp.isfinite(x_k))
+    x_minus, t_end, code = swing_from(
+        model, x_k, jnp.where(alive, t_k, 1e-12), jnp.where(alive, t_max, 2e-12), config
+    )
     code = RESULTS.where(bad, RESULTS.fell, code)
     return finish_step(model, x_minus, t_end, code, x0)
 
@@ -143,34 +157,48 @@ def push_sensitivity_autodiff(model, x_star, period, phases, config=DEFAULT_CONF
 
     def one(s):
         return jax.jacfwd(lambda P: impulse_step(model, x_star, s * period, P, config).x_plus)(
-            jnp.zeros(2))
+            jnp.zeros(2)
+        )
 
     return jax.vmap(one)(jnp.asarray(phases, dtype=float))
 
 
 # ---- linear sensitivity, way 2: transverse linearization + input term -------------------
 @eqx.filter_jit
-def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-11,
-                                atol=1e-11):
+def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-11, atol=1e-11):
     """$\\partial\\zeta^+/\\partial P$ (shape `(len(phases), 2n-1, 2)`): the transverse
     coordinates after the next impact per unit hip impulse at each phase, from the
     transverse linearization (thesis 6.21, 6.30, 6.38) plus the input term
     $L(t_s) B(t_s)$. Needs the `vhcjax.stability` module.
     """
     from .. import stability as tr
+
     n = model.n_dof
     k = n - 1
     r = 2 * k + 1
     lin = tr.transverse_linearization(model, x_star, x_minus, period, rtol=rtol, atol=atol)
     E0 = model.energy(x_star)
     phi0 = x_star[1:n]
-    u0 = jnp.concatenate([jnp.stack([x_star[0], x_star[n]]), phi0, x_star[n + 1 :] / x_star[n],
-                          jnp.eye(r, dtype=x_star.dtype).reshape(-1)])
+    u0 = jnp.concatenate(
+        [
+            jnp.stack([x_star[0], x_star[n]]),
+            phi0,
+            x_star[n + 1 :] / x_star[n],
+            jnp.eye(r, dtype=x_star.dtype).reshape(-1),
+        ]
+    )
     ts = jnp.asarray(phases, dtype=float) * lin.period
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(tr.joint_vector_field), diffrax.Tsit5(), t0=0.0,
-        t1=lin.period, dt0=None, y0=u0, args=(model, E0), saveat=diffrax.SaveAt(ts=ts),
-        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol), max_steps=4096,
+        diffrax.ODETerm(tr.joint_vector_field),
+        diffrax.Tsit5(),
+        t0=0.0,
+        t1=lin.period,
+        dt0=None,
+        y0=u0,
+        args=(model, E0),
+        saveat=diffrax.SaveAt(ts=ts),
+        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        max_steps=4096,
         throw=False,
     )
 
@@ -189,8 +217,18 @@ def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-
 
 # ---- largest push survived -----------------------------------------------------------------
 @eqx.filter_jit
-def push_recovery(model, x_star, period, phases, angles, magnitudes, num_steps=30, tol=1e-4,
-                  duration=0.0, config=FAST_CONFIG):
+def push_recovery(
+    model,
+    x_star,
+    period,
+    phases,
+    angles,
+    magnitudes,
+    num_steps=30,
+    tol=1e-4,
+    duration=0.0,
+    config=FAST_CONFIG,
+):
     """Recovery after a push of magnitude `magnitudes` (impulse in N s, or force in N when
     `duration > 0`) at phases `phases` in directions `angles` (rad), all of one batch shape.
 
@@ -202,10 +240,12 @@ def push_recovery(model, x_star, period, phases, angles, magnitudes, num_steps=3
 
     def first(x, alive):
         if duration > 0:
-            return jax.vmap(lambda xx, ss, pp, aa: pulse_step(
-                model, xx, ss * period, pp, duration, config, aa))(x, s, P, alive)
-        return jax.vmap(lambda xx, ss, pp, aa: impulse_step(
-            model, xx, ss * period, pp, config, aa))(x, s, P, alive)
+            return jax.vmap(
+                lambda xx, ss, pp, aa: pulse_step(model, xx, ss * period, pp, duration, config, aa)
+            )(x, s, P, alive)
+        return jax.vmap(
+            lambda xx, ss, pp, aa: impulse_step(model, xx, ss * period, pp, config, aa)
+        )(x, s, P, alive)
 
     return recover(model, x0, x_star, num_steps, tol=tol, config=config, first_step=first)
 
@@ -229,9 +269,22 @@ class PushThresholds(eqx.Module):
     duration: float
 
 
-def max_push(model, x_star, period, phases, angles, *, p_max=20.0, duration=0.0,
-             iterations=14, scan=8, num_steps=30, tol=1e-4, config=FAST_CONFIG,
-             progress=None):
+def max_push(
+    model,
+    x_star,
+    period,
+    phases,
+    angles,
+    *,
+    p_max=20.0,
+    duration=0.0,
+    iterations=14,
+    scan=8,
+    num_steps=30,
+    tol=1e-4,
+    config=FAST_CONFIG,
+    progress=None,
+):
     """Largest impulse (or pulse force) at each phase and direction after which the walker
     returns to the gait within `num_steps`, by batched bisection on `[0, p_max]`.
 
@@ -243,14 +296,19 @@ def max_push(model, x_star, period, phases, angles, *, p_max=20.0, duration=0.0,
     s_flat, a_flat = jnp.asarray(S.ravel()), jnp.asarray(A.ravel())
 
     def survives(mag):
-        rec = push_recovery(model, x_star, period, s_flat, a_flat, mag, num_steps, tol,
-                            duration, config)
+        rec = push_recovery(
+            model, x_star, period, s_flat, a_flat, mag, num_steps, tol, duration, config
+        )
         return rec.label == CONVERGED
 
-    th = bisect_threshold(survives, np.zeros(S.size), np.full(S.size, p_max),
-                          iterations=iterations, scan=scan, progress=progress)
+    th = bisect_threshold(
+        survives,
+        np.zeros(S.size),
+        np.full(S.size, p_max),
+        iterations=iterations,
+        scan=scan,
+        progress=progress,
+    )
     largest = th.lo.reshape(S.shape)
     fragile = phases[np.nanargmin(np.where(np.isfinite(largest), largest, np.inf), axis=0)]
     return PushThresholds(phases, angles, th, largest, fragile, float(duration))
-
-

@@ -14,8 +14,8 @@ import jax
 import jax.numpy as jnp
 
 from .. import trig
-from ..hybrid import FAST_CONFIG, step_unchecked
 from .._results import RESULTS
+from ..hybrid import FAST_CONFIG, step_unchecked
 
 CONVERGED, FELL, OTHER_CYCLE, UNDECIDED = 0, 1, 2, 3
 LABEL_NAMES = ("converged", "fell", "other_cycle", "undecided")
@@ -46,8 +46,19 @@ class Recovery(eqx.Module):
     step_times: jax.Array
 
 
-def recover(model, x0, x_star, num_steps=50, *, tol=1e-4, cycle_tol=1e-5, max_period=4,
-            config=FAST_CONFIG, first_step=None, stop_when_converged=True):
+def recover(
+    model,
+    x0,
+    x_star,
+    num_steps=50,
+    *,
+    tol=1e-4,
+    cycle_tol=1e-5,
+    max_period=4,
+    config=FAST_CONFIG,
+    first_step=None,
+    stop_when_converged=True,
+):
     """Simulate a batch of post-impact states and classify their return to a gait.
 
     **Arguments:**
@@ -70,12 +81,32 @@ def recover(model, x0, x_star, num_steps=50, *, tol=1e-4, cycle_tol=1e-5, max_pe
     **Returns:** a `Recovery`.
     """
     with trig.polynomial():  # many walkers x many steps: vectorizable sin/cos (see `trig`)
-        return _recover(model, x0, x_star, num_steps, tol, cycle_tol, max_period, config,
-                        first_step, stop_when_converged)
+        return _recover(
+            model,
+            x0,
+            x_star,
+            num_steps,
+            tol,
+            cycle_tol,
+            max_period,
+            config,
+            first_step,
+            stop_when_converged,
+        )
 
 
-def _recover(model, x0, x_star, num_steps, tol, cycle_tol, max_period, config, first_step,
-             stop_when_converged):
+def _recover(
+    model,
+    x0,
+    x_star,
+    num_steps,
+    tol,
+    cycle_tol,
+    max_period,
+    config,
+    first_step,
+    stop_when_converged,
+):
     x0 = jnp.asarray(x0, dtype=float)
     x_star = jnp.asarray(x_star, dtype=float)
     B = x0.shape[0]
@@ -139,8 +170,11 @@ def _recover(model, x0, x_star, num_steps, tol, cycle_tol, max_period, config, f
     other = undecided & (period > 0) & (k >= H)
     label = jnp.where(other, OTHER_CYCLE, jnp.where(undecided, UNDECIDED, label))
     period = jnp.where(other, period, 0)
-    code = jnp.where(other, RESULTS.other_cycle._value,
-                     jnp.where(label == UNDECIDED, RESULTS.undecided._value, code))
+    code = jnp.where(
+        other,
+        RESULTS.other_cycle._value,
+        jnp.where(label == UNDECIDED, RESULTS.undecided._value, code),
+    )
     result = eqx.tree_at(lambda r: r._value, RESULTS.successful, code)
     return Recovery(label, steps, period, result, x, dist, times)
 

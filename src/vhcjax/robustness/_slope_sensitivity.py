@@ -108,4 +108,3 @@ def slope_sensitivity(model, z_star, *, config=DEFAULT_CONFIG):
     dlam = np.einsum("ij,jk,ki->i", W, dJn, V)
     dmod = np.real(np.conj(lam) * dlam) / np.abs(lam)
     return SlopeSensitivity(z, dz, T, dT, L, dL, v, dv, lam, dlam, dmod, J, dJ)
-

@@ -17,9 +17,9 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ._bisection import bisect_threshold
-from ..models import CompassGait
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, step_unchecked
+from ..models import CompassGait
+from ._bisection import bisect_threshold
 from ._recovery import CONVERGED, recover
 
 
@@ -42,22 +42,25 @@ class FloorStepCompassGait(CompassGait):
 
 def floor_step_model(model, h):
     """The `FloorStepCompassGait` with the parameters of `model` and floor offset `h`."""
-    fields = {k: getattr(model, k) for k in ("m1", "m2", "mH", "a", "b", "g", "psi",
-                                             "min_strike_angle")}
+    fields = {
+        k: getattr(model, k) for k in ("m1", "m2", "mH", "a", "b", "g", "psi", "min_strike_angle")
+    }
     return FloorStepCompassGait(**fields, floor_offset=h)
 
 
 def _first_step_fn(model, h, config):
     def first(x, alive):
-        return jax.vmap(lambda hh, xx, aa: step_unchecked(floor_step_model(model, hh), xx, config,
-                                                  alive=aa))(h, x, alive)
+        return jax.vmap(
+            lambda hh, xx, aa: step_unchecked(floor_step_model(model, hh), xx, config, alive=aa)
+        )(h, x, alive)
 
     return first
 
 
 @eqx.filter_jit
-def terrain_recovery(model, x_star, h, num_steps=30, tol=1e-4, config=FAST_CONFIG,
-                     stop_when_converged=True):
+def terrain_recovery(
+    model, x_star, h, num_steps=30, tol=1e-4, config=FAST_CONFIG, stop_when_converged=True
+):
     """Walk from the gait's post-impact state `x_star` onto a floor step of height `h`
     (batch of heights), then `num_steps - 1` normal steps.
 
@@ -65,13 +68,30 @@ def terrain_recovery(model, x_star, h, num_steps=30, tol=1e-4, config=FAST_CONFI
     """
     h = jnp.asarray(h, dtype=float)
     x0 = jnp.broadcast_to(x_star, (h.shape[0], x_star.shape[0]))
-    return recover(model, x0, x_star, num_steps, tol=tol, config=config,
-                   first_step=_first_step_fn(model, h, config),
-                   stop_when_converged=stop_when_converged)
+    return recover(
+        model,
+        x0,
+        x_star,
+        num_steps,
+        tol=tol,
+        config=config,
+        first_step=_first_step_fn(model, h, config),
+        stop_when_converged=stop_when_converged,
+    )
 
 
-def max_floor_step(model, x_star, *, h_max=0.05, iterations=12, scan=50, num_steps=40,
-                   tol=1e-4, config=FAST_CONFIG, progress=None):
+def max_floor_step(
+    model,
+    x_star,
+    *,
+    h_max=0.05,
+    iterations=12,
+    scan=50,
+    num_steps=40,
+    tol=1e-4,
+    config=FAST_CONFIG,
+    progress=None,
+):
     """Largest step down and step up (m) met on the gait after which the walker returns to
     the gait within `num_steps`, by batched bisection on `[0, h_max]` after a scan of
     `scan` heights (1 mm apart by default), so that the *first* failing height is found:
@@ -87,8 +107,14 @@ def max_floor_step(model, x_star, *, h_max=0.05, iterations=12, scan=50, num_ste
         rec = terrain_recovery(model, x_star, sign * mag, num_steps, tol, config)
         return rec.label == CONVERGED
 
-    return bisect_threshold(survives, np.zeros(2), np.full(2, h_max), iterations=iterations,
-                            scan=scan, progress=progress)
+    return bisect_threshold(
+        survives,
+        np.zeros(2),
+        np.full(2, h_max),
+        iterations=iterations,
+        scan=scan,
+        progress=progress,
+    )
 
 
 class GaitSensitivity(eqx.Module):

@@ -2,16 +2,16 @@
 batch in one loop (per-member convergence, inexact evaluations, chord steps), and thin
 wrappers over optimistix's Levenberg-Marquardt and an optax minimiser."""
 
+from ._implicit import (
+    detach as detach,
+    eigenvalues as eigenvalues,
+    implicit_outputs as implicit_outputs,
+    linearised as linearised,
+)
 from ._newton import (
     batch_jacobian as batch_jacobian,
     damped_newton as damped_newton,
     damped_newton_batch as damped_newton_batch,
     levenberg_marquardt as levenberg_marquardt,
     optax_minimise as optax_minimise,
-)
-from ._implicit import (
-    detach as detach,
-    eigenvalues as eigenvalues,
-    implicit_outputs as implicit_outputs,
-    linearised as linearised,
 )

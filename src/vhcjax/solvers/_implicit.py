@@ -37,7 +37,9 @@ def detach(tree):
     `jax.grad(f)(5.0)` and `jax.jacfwd` hand over) does not become a compile-time
     constant of a jitted search."""
     tree = jax.lax.stop_gradient(tree)
-    return jax.tree_util.tree_map(lambda x: jnp.asarray(x, float) if isinstance(x, float) else x, tree)
+    return jax.tree_util.tree_map(
+        lambda x: jnp.asarray(x, float) if isinstance(x, float) else x, tree
+    )
 
 
 def _as_arrays(tree):
@@ -59,7 +61,7 @@ def _unflat(vector, like):
     for x in leaves:
         if _inexact(x):
             size = int(np.prod(jnp.shape(x)))
-            out.append(jnp.reshape(vector[i:i + size], jnp.shape(x)).astype(jnp.result_type(x)))
+            out.append(jnp.reshape(vector[i : i + size], jnp.shape(x)).astype(jnp.result_type(x)))
             i += size
         else:
             out.append(x)
@@ -74,7 +76,11 @@ def _tangents(flat_tangent, like):
     for x in leaves:
         if _inexact(x):
             size = int(np.prod(jnp.shape(x)))
-            out.append(jnp.reshape(flat_tangent[..., i:i + size], jnp.shape(x)).astype(jnp.result_type(x)))
+            out.append(
+                jnp.reshape(flat_tangent[..., i : i + size], jnp.shape(x)).astype(
+                    jnp.result_type(x)
+                )
+            )
             i += size
         else:
             out.append(np.zeros(jnp.shape(x), dtype=jax.dtypes.float0))

@@ -2,7 +2,6 @@
 in one loop, optimistix's Levenberg-Marquardt, and an optax minimiser of the squared
 residual."""
 
-
 import jax
 import jax.numpy as jnp
 import optimistix as optx
@@ -13,8 +12,18 @@ _TOL_FACTOR = 1e-4
 _ERROR_FACTOR = 100.0
 
 
-def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10,
-                  tolerances=None, chord_below=None, residual_cap=jnp.inf):
+def damped_newton(
+    fn,
+    x0,
+    *,
+    rtol=1e-11,
+    atol=1e-11,
+    max_steps=50,
+    max_trials=10,
+    tolerances=None,
+    chord_below=None,
+    residual_cap=jnp.inf,
+):
     r"""Newton's method with a forward-mode Jacobian, globalised by Levenberg-Marquardt
     damping, optionally inexact (loose integrations while far from the solution) and
     finishing with chord steps.
@@ -60,9 +69,17 @@ def damped_newton(fn, x0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10
     def one(X, tol):  # the batch of one member that `damped_newton_batch` iterates
         return jax.tree_util.tree_map(lambda a: jnp.asarray(a)[None], call(X[0], tol[0]))
 
-    out = damped_newton_batch(one, x0[None], rtol=rtol, atol=atol, max_steps=max_steps,
-                              max_trials=max_trials, tolerances=tolerances,
-                              chord_below=chord_below, residual_cap=residual_cap)
+    out = damped_newton_batch(
+        one,
+        x0[None],
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+        max_trials=max_trials,
+        tolerances=tolerances,
+        chord_below=chord_below,
+        residual_cap=residual_cap,
+    )
     return jax.tree_util.tree_map(lambda a: a[0], out)
 
 
@@ -70,6 +87,7 @@ def batch_jacobian(fn, X):
     """`(R, J, aux)` of `fn(X) -> (R, aux)` for a batch `X` of shape `(B, n)` whose rows
     are independent: `J[i] = dR[i]/dX[i]`, by forward mode (`jax.jvp` along each of the
     `n` unknowns, for every member at once; the primal is computed once)."""
+
     def push(v):
         (R, aux), (dR, _) = jax.jvp(fn, (X,), (jnp.broadcast_to(v, X.shape),))
         return dR, (R, aux)
@@ -78,8 +96,18 @@ def batch_jacobian(fn, X):
     return R, J, aux
 
 
-def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_trials=10,
-                        tolerances=None, chord_below=None, residual_cap=jnp.inf):
+def damped_newton_batch(
+    fn,
+    X0,
+    *,
+    rtol=1e-11,
+    atol=1e-11,
+    max_steps=50,
+    max_trials=10,
+    tolerances=None,
+    chord_below=None,
+    residual_cap=jnp.inf,
+):
     r"""`damped_newton` on every member of a batch at once, written out along the leading
     axis (`X0`: `(B, n)`; `fn(X, tol) -> (R, aux)` with `tol`: `(B,)`, each row of `R`
     depending on its own row of `X` only, every leaf of `aux` with the batch axis first).
@@ -145,8 +173,10 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
             Jt = jnp.swapaxes(J, -1, -2)
             JtJ = Jt @ J
             newton = trials == 0
-            dX = solve(where(newton, J, JtJ + lam[:, None, None] * eye),
-                       where(newton, R, (Jt @ R[..., None])[..., 0]))
+            dX = solve(
+                where(newton, J, JtJ + lam[:, None, None] * eye),
+                where(newton, R, (Jt @ R[..., None])[..., 0]),
+            )
             dX = where(jnp.isfinite(dX).all(-1) & ~first, dX, jnp.zeros_like(dX))
             # A damped trial with no step ($J^Tr = 0$, or no finite solution, e.g. J = 0
             # where the residual is undefined): the member cannot move, so it stops as
@@ -159,9 +189,12 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
             # member can stop at a loose residual that an exact one cannot beat).
             tightened = tol < tol_R
             improved = first | (
-                jnp.isfinite(R_t).all(-1) & jnp.isfinite(J_t).all((-2, -1))
-                & ((jnp.sum(R_t**2, -1) < jnp.sum(R**2, -1))
-                   | (tightened & (norm(R_t) <= norm(R) + _ERROR_FACTOR * tol_R)))
+                jnp.isfinite(R_t).all(-1)
+                & jnp.isfinite(J_t).all((-2, -1))
+                & (
+                    (jnp.sum(R_t**2, -1) < jnp.sum(R**2, -1))
+                    | (tightened & (norm(R_t) <= norm(R) + _ERROR_FACTOR * tol_R))
+                )
             )
             X_new, R_new, J_new, aux_new = pick(improved, (X - dX, R_t, J_t, aux_t), (X, R, J, aux))
             size = atol + rtol * norm(X - dX)
@@ -181,45 +214,70 @@ def damped_newton_batch(fn, X0, *, rtol=1e-11, atol=1e-11, max_steps=50, max_tri
             lam_new = jnp.where(improved, 0.0, jnp.where(newton, lam_start, 10.0 * lam))
             trials_new = jnp.where(improved, 0, jnp.where(stuck, max_trials, trials + 1))
             tol_new = jnp.where(improved, tol * jnp.ones_like(tol_R), tol_R)
-            new = (X_new, R_new, J_new, aux_new, k + improved, trials_new, done_new, lam_new,
-                   chord_new, tol_new)
+            new = (
+                X_new,
+                R_new,
+                J_new,
+                aux_new,
+                k + improved,
+                trials_new,
+                done_new,
+                lam_new,
+                chord_new,
+                tol_new,
+            )
             return pick(active(carry), new, carry)  # stopped members keep their state
 
         return body
 
     # Shapes from the residual alone: `J[i] = dR[i]/dX[i]` (`batch_jacobian`).
-    R_shape, aux_shape = jax.eval_shape(
-        lambda X, tol: residual_jaxpr(X, tol, *rconsts), X0, tol0
-    )
+    R_shape, aux_shape = jax.eval_shape(lambda X, tol: residual_jaxpr(X, tol, *rconsts), X0, tol0)
     J_shape = jax.ShapeDtypeStruct(R_shape.shape + (n,), R_shape.dtype)
 
     def zeros(tree):
         return jax.tree_util.tree_map(
-            lambda leaf: jnp.zeros(leaf.shape, leaf.dtype)
-            + jnp.reshape(tie, (B,) + (1,) * (len(leaf.shape) - 1)).astype(leaf.dtype),
+            lambda leaf: (
+                jnp.zeros(leaf.shape, leaf.dtype)
+                + jnp.reshape(tie, (B,) + (1,) * (len(leaf.shape) - 1)).astype(leaf.dtype)
+            ),
             tree,
         )
 
-    init = (X0, zeros(R_shape), zeros(J_shape), zeros(aux_shape),
-            tie.astype(int) - 1, tie.astype(int), tie != 0, tie, tie != 0, tol0)
+    init = (
+        X0,
+        zeros(R_shape),
+        zeros(J_shape),
+        zeros(aux_shape),
+        tie.astype(int) - 1,
+        tie.astype(int),
+        tie != 0,
+        tie,
+        tie != 0,
+        tol0,
+    )
     carry = jax.lax.while_loop(
         lambda c: jnp.any(iterating(c)), make_body(evaluate, iterating), init
     )
     if chord_below is not None:  # the chord loop: the same steps, the residual alone
+
         def residual(X, tol, J):
             R, aux = residual_jaxpr(X, tol, *rconsts)
             return R, J, aux
 
-        carry = jax.lax.while_loop(lambda c: jnp.any(chord_iterating(c)),
-                                   make_body(residual, chord_iterating), carry)
+        carry = jax.lax.while_loop(
+            lambda c: jnp.any(chord_iterating(c)), make_body(residual, chord_iterating), carry
+        )
     X, R, _, aux, k = carry[:5]
     return X, R, aux, k
 
 
 def levenberg_marquardt(residual, x0, rtol, atol, max_steps):
     sol = optx.least_squares(
-        lambda x, _: residual(x), optx.LevenbergMarquardt(rtol=rtol, atol=atol), x0,
-        max_steps=max_steps, throw=False,
+        lambda x, _: residual(x),
+        optx.LevenbergMarquardt(rtol=rtol, atol=atol),
+        x0,
+        max_steps=max_steps,
+        throw=False,
     )
     return sol.value, sol.stats["num_steps"]
 

@@ -25,13 +25,29 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from ..models import CompassGait
-from ..hybrid import solve_to_event
-from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, flow, ode_solver, step_unchecked, simulate
 from .. import hybrid as _poincare
-from ..hybrid import fixed_point, jacobian, step_map
+from .._batching import (
+    MAX_DISPATCH,
+    bucket_size,
+    host_workers,
+    in_chunks,
+    round_to_devices,
+    shard_batch,
+)
 from .._results import RESULTS
-from .._batching import bucket_size, MAX_DISPATCH, host_workers, in_chunks, round_to_devices, shard_batch
+from ..hybrid import (
+    DEFAULT_CONFIG,
+    FAST_CONFIG,
+    fixed_point,
+    flow,
+    jacobian,
+    ode_solver,
+    simulate,
+    solve_to_event,
+    step_map,
+    step_unchecked,
+)
+from ..models import CompassGait
 from ._transverse import TransverseLinearization, transverse_linearization
 
 #: Stable and unstable period-1 gaits of the default compass gait at 3 degrees
@@ -112,8 +128,9 @@ def _phase_monotone(model, x0, period, config):
     """Whether $\\dot q_1$ keeps the sign it has at the start, at `PHASE_SAMPLES` times of
     the step (with a margin of 1e-6 of its largest modulus)."""
     ts = jnp.linspace(0.0, 1.0, PHASE_SAMPLES) * period
-    sol = flow(model, x0, period * (1 + 1e-12) + 1e-12, config, saveat=diffrax.SaveAt(ts=ts),
-               event=False)
+    sol = flow(
+        model, x0, period * (1 + 1e-12) + 1e-12, config, saveat=diffrax.SaveAt(ts=ts), event=False
+    )
     assert sol.ys is not None  # saved at `ts`
     dq1 = sol.ys[:, model.n_dof]
     s = jnp.sign(dq1[0])
@@ -126,15 +143,18 @@ def _transverse_checks(model, x0, sr, tl, pm, config):
     ill = (condition > MAX_CONDITION) | (tl.transversality < 1e-8)
     scale = jnp.maximum(jnp.max(jnp.abs(sr.x_minus)), 1.0)
     orbit_off = (jnp.max(jnp.abs(tl.x_minus - sr.x_minus)) > AGREEMENT_RTOL * scale) | (
-        jnp.abs(tl.period - sr.period) > AGREEMENT_RTOL * jnp.abs(sr.period))
+        jnp.abs(tl.period - sr.period) > AGREEMENT_RTOL * jnp.abs(sr.period)
+    )
     disagreement = _spectral_distance(tl.multipliers, pm)
     disagreement = jnp.where(jnp.isfinite(disagreement), disagreement, jnp.inf)
     monotone = _phase_monotone(model, x0, sr.period, config)
     # The cause first: with a non-monotone phase the construction's own integration
     # usually fails too (phi' = dq2/dq1 blows up where dq1 = 0).
     code = RESULTS.where(monotone, tl.result, RESULTS.phase_not_monotone)
-    for bad, c in ((ill, RESULTS.ill_conditioned),
-                   (orbit_off | (disagreement > AGREEMENT_RTOL), RESULTS.methods_disagree)):
+    for bad, c in (
+        (ill, RESULTS.ill_conditioned),
+        (orbit_off | (disagreement > AGREEMENT_RTOL), RESULTS.methods_disagree),
+    ):
         code = RESULTS.where((code == RESULTS.successful) & bad, c, code)
     return code, disagreement, condition
 
@@ -147,9 +167,11 @@ def _gait_multipliers(model, z, config=DEFAULT_CONFIG):
     sr = step_unchecked(model, x0, config)
     tl = transverse_linearization(model, x0, sr.x_minus, sr.period)
     pm = _sort(jnp.linalg.eigvals(jacobian(model, z, 1, config)))
-    code = RESULTS.where(sr.result == RESULTS.successful,
-                         RESULTS.where(jnp.all(jnp.isfinite(pm)), RESULTS.successful,
-                                       RESULTS.nonfinite), sr.result)
+    code = RESULTS.where(
+        sr.result == RESULTS.successful,
+        RESULTS.where(jnp.all(jnp.isfinite(pm)), RESULTS.successful, RESULTS.nonfinite),
+        sr.result,
+    )
     tcode, disagreement, condition = _transverse_checks(model, x0, sr, tl, pm, config)
     tcode = RESULTS.where(code == RESULTS.successful, tcode, code)
     ok = code == RESULTS.successful
@@ -159,11 +181,12 @@ def _gait_multipliers(model, z, config=DEFAULT_CONFIG):
     # placeholders (0 where not finite); `transverse_result` says why.
     broke = tcode != RESULTS.successful
     tl = jax.tree_util.tree_map(
-        lambda x: jnp.where(broke & ~jnp.isfinite(x), 0.0, x) if eqx.is_inexact_array(x) else x,
-        tl)
+        lambda x: jnp.where(broke & ~jnp.isfinite(x), 0.0, x) if eqx.is_inexact_array(x) else x, tl
+    )
     tr = tl.multipliers
-    return GaitMultipliers(tr, pm, mx, ok & (mx < 1.0), sr.period, sr.x_minus, code, tcode,
-                           disagreement, condition, tl)
+    return GaitMultipliers(
+        tr, pm, mx, ok & (mx < 1.0), sr.period, sr.x_minus, code, tcode, disagreement, condition, tl
+    )
 
 
 @eqx.filter_jit
@@ -198,9 +221,12 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, mesh=None):
     psis = jnp.concatenate([psis, jnp.broadcast_to(psis[:1], (pad,))])
     zs = jnp.concatenate([zs, jnp.broadcast_to(zs[:1], (pad, zs.shape[1]))])
     if n > _MAX_CHUNK:  # see `_sharding.MAX_DISPATCH`; every chunk is one full bucket
-        out = in_chunks(lambda i, j: family_multipliers(model, psis[i:j], zs[i:j], config,
-                                                        mesh=mesh), n + pad, _MAX_CHUNK,
-                        host_workers(mesh))
+        out = in_chunks(
+            lambda i, j: family_multipliers(model, psis[i:j], zs[i:j], config, mesh=mesh),
+            n + pad,
+            _MAX_CHUNK,
+            host_workers(mesh),
+        )
         return jax.tree_util.tree_map(lambda x: x[:n], out)
     psis, zs = shard_batch((psis, zs), mesh)
     out = _family_multipliers_padded(model, psis, zs, config)
@@ -217,7 +243,9 @@ def gait_multipliers(model, z, config=DEFAULT_CONFIG):
     """
     if not hasattr(model, "psi"):
         return _gait_multipliers_jit(model, z, config)
-    out = family_multipliers(model, jnp.asarray(model.psi)[None], jnp.asarray(z, float)[None], config)
+    out = family_multipliers(
+        model, jnp.asarray(model.psi)[None], jnp.asarray(z, float)[None], config
+    )
     return jax.tree_util.tree_map(lambda x: x[0], out)
 
 
@@ -231,8 +259,10 @@ def finite_difference_jacobian(model, z, k=1, h=1e-6, config=DEFAULT_CONFIG):
     eye = jnp.eye(z.shape[0], dtype=z.dtype)
 
     def col(e):
-        return (step_map(model, z + h * e, k, config).z_next
-                - step_map(model, z - h * e, k, config).z_next) / (2 * h)
+        return (
+            step_map(model, z + h * e, k, config).z_next
+            - step_map(model, z - h * e, k, config).z_next
+        ) / (2 * h)
 
     return jax.vmap(col, out_axes=1)(eye)
 
@@ -252,23 +282,29 @@ def _gated_strike_event(model):
         # the slope line, as for the unstable family).
         return jnp.where(model.strike_gate(q) > 0, model.guard(q), -1.0 - jnp.abs(model.guard(q)))
 
-    return diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13),
-                         direction=False)
+    return diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13), direction=False)
 
 
 def _midswing_event():
     def cond(t, y, args, **kwargs):
         return y[0]
 
-    return diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13),
-                         direction=False)
+    return diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13), direction=False)
 
 
 def _flow_event(model, x0, event, config):
     sol = solve_to_event(
-        model.vector_field, (event.cond_fn,), (event.direction,), x0, None, 0.0,
-        config.t_max_factor * model.time_scale, solver=ode_solver(config.solver),
-        rtol=config.rtol, atol=config.atol, max_steps=config.max_steps,
+        model.vector_field,
+        (event.cond_fn,),
+        (event.direction,),
+        x0,
+        None,
+        0.0,
+        config.t_max_factor * model.time_scale,
+        solver=ode_solver(config.solver),
+        rtol=config.rtol,
+        atol=config.atol,
+        max_steps=config.max_steps,
     )
     ok = sol.result == diffrax.RESULTS.event_occurred
     return sol.ys[-1], sol.ts[-1], ok
@@ -307,8 +343,7 @@ _fixed_point_jit = _poincare.fixed_point_jit
 
 @eqx.filter_jit
 def _fixed_points_batch(model, psis, z0s, k=1, config=DEFAULT_CONFIG):
-    return jax.vmap(lambda p, z: fixed_point(with_slope(model, p), z, k, config=config))(
-        psis, z0s)
+    return jax.vmap(lambda p, z: fixed_point(with_slope(model, p), z, k, config=config))(psis, z0s)
 
 
 class Family(eqx.Module):
@@ -321,8 +356,16 @@ class Family(eqx.Module):
     result: RESULTS
 
 
-def period1_family(psis, family="stable", *, model=None, seed=None, seed_psi=math.radians(3.0),
-                   coarse_step=math.radians(0.1), config=DEFAULT_CONFIG):
+def period1_family(
+    psis,
+    family="stable",
+    *,
+    model=None,
+    seed=None,
+    seed_psi=math.radians(3.0),
+    coarse_step=math.radians(0.1),
+    config=DEFAULT_CONFIG,
+):
     """Period-1 gaits at the slopes `psis` (rad), continued from a seed.
 
     A sequential continuation with a secant predictor on a coarse slope grid (step
@@ -348,8 +391,12 @@ def period1_family(psis, family="stable", *, model=None, seed=None, seed_psi=mat
             known[float(p)] = zs[-1]
     if not known:  # no gait at the seed (e.g. another model): every slope fails, cleanly
         n = len(psis)
-        return Family(jnp.asarray(psis), jnp.broadcast_to(jnp.asarray(z_seed), (n, len(z_seed))),
-                      jnp.zeros(n), jax.vmap(lambda _: RESULTS.not_converged)(jnp.arange(n)))
+        return Family(
+            jnp.asarray(psis),
+            jnp.broadcast_to(jnp.asarray(z_seed), (n, len(z_seed))),
+            jnp.zeros(n),
+            jax.vmap(lambda _: RESULTS.not_converged)(jnp.arange(n)),
+        )
     ps = np.array(sorted(known))
     Z = np.stack([known[p] for p in ps])
     guesses = np.stack([np.interp(psis, ps, Z[:, j]) for j in range(Z.shape[1])], axis=1)
@@ -357,7 +404,8 @@ def period1_family(psis, family="stable", *, model=None, seed=None, seed_psi=mat
     # Outside the continued range the guess is an extrapolation: flag as not converged.
     inside = (psis >= ps.min() - 1e-12) & (psis <= ps.max() + 1e-12)
     code = jax.vmap(lambda i, r: RESULTS.where(i, r, RESULTS.not_converged))(
-        jnp.asarray(inside), fps.result)
+        jnp.asarray(inside), fps.result
+    )
     return Family(jnp.asarray(psis), fps.z, fps.periods[:, 0], code)
 
 
@@ -382,8 +430,17 @@ class PeriodDoubling(eqx.Module):
     iterations: int
 
 
-def period_doubling_slope(psi_lo, psi_hi, z_lo, *, model=None, k=1, tol=math.radians(1e-5),
-                          config=DEFAULT_CONFIG, max_iter=60):
+def period_doubling_slope(
+    psi_lo,
+    psi_hi,
+    z_lo,
+    *,
+    model=None,
+    k=1,
+    tol=math.radians(1e-5),
+    config=DEFAULT_CONFIG,
+    max_iter=60,
+):
     """Slope in `[psi_lo, psi_hi]` where a multiplier of the period-`k` gait crosses $-1$.
 
     $f(\\psi) = \\det(I + J(\\psi))$ ($J$ the Jacobian of $P^k$ at the fixed point) is
@@ -445,8 +502,9 @@ class PeriodKOrbit(eqx.Module):
 def settle(model, z0, num_steps=400, config=FAST_CONFIG):
     """Post-impact section coordinates after `num_steps` steps from `z0` (None if the
     walker fell): a seed for period-k searches on an attractor."""
-    sim = _simulate_jit(model, model.section_to_state(jnp.asarray(z0, float)), num_steps,
-                        config=config)
+    sim = _simulate_jit(
+        model, model.section_to_state(jnp.asarray(z0, float)), num_steps, config=config
+    )
     if sim.result != RESULTS.successful:
         return None
     return np.asarray(model.state_to_section(sim.steps.x_plus[-1]))
@@ -473,9 +531,16 @@ def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG):
         if k % j == 0 and np.max(np.abs(orbit[j] - orbit[0])) < 1e-7:
             minimal = j
             break
-    return PeriodKOrbit(z, orbit, np.asarray(fp.periods), np.asarray(_sort(jnp.linalg.eigvals(J))),
-                        np.asarray(_sort(jnp.linalg.eigvals(Jfd))), float(fp.residual), fp.result,
-                        minimal)
+    return PeriodKOrbit(
+        z,
+        orbit,
+        np.asarray(fp.periods),
+        np.asarray(_sort(jnp.linalg.eigvals(J))),
+        np.asarray(_sort(jnp.linalg.eigvals(Jfd))),
+        float(fp.residual),
+        fp.result,
+        minimal,
+    )
 
 
 _step_map_jit = _poincare.step_map_jit
@@ -510,8 +575,18 @@ def _long_runs(model, psis, x0s, num_steps, num_record, config):
     return jax.vmap(one)(psis, x0s)
 
 
-def bifurcation_diagram(psis, zs, *, model=None, num_transient=300, num_record=64,
-                        perturbation=1e-4, config=FAST_CONFIG, chunk=None, mesh=None):
+def bifurcation_diagram(
+    psis,
+    zs,
+    *,
+    model=None,
+    num_transient=300,
+    num_record=64,
+    perturbation=1e-4,
+    config=FAST_CONFIG,
+    chunk=None,
+    mesh=None,
+):
     """Simulate from the period-1 gaits `zs` at slopes `psis` (rad) for
     `num_transient + num_record` steps (batched with `vmap`) and keep the step periods
     of the last `num_record`.
@@ -525,8 +600,12 @@ def bifurcation_diagram(psis, zs, *, model=None, num_transient=300, num_record=6
     model = CompassGait() if model is None else model
     psis = np.asarray(psis, float)
     zs = np.asarray(zs, float)
-    x0s = np.stack([np.asarray(with_slope(model, p).section_to_state(jnp.asarray(z)))
-                    for p, z in zip(psis, zs)])
+    x0s = np.stack(
+        [
+            np.asarray(with_slope(model, p).section_to_state(jnp.asarray(z)))
+            for p, z in zip(psis, zs)
+        ]
+    )
     x0s[:, -1] += perturbation
     n = len(psis)
     chunk = n if chunk is None else chunk
@@ -598,8 +677,11 @@ def period2_branch(model, pd, psis, config=DEFAULT_CONFIG, amplitudes=(3e-3, 1e-
         if i == 0:
             trials = [pd.z + s * v for s in amplitudes]
         else:
-            trials = [zs[-1] if len(zs) == 1 else zs[-1] + (zs[-1] - zs[-2])
-                      * (p - out_psi[-1]) / (out_psi[-1] - out_psi[-2])]
+            trials = [
+                zs[-1]
+                if len(zs) == 1
+                else zs[-1] + (zs[-1] - zs[-2]) * (p - out_psi[-1]) / (out_psi[-1] - out_psi[-2])
+            ]
         found = None
         for guess in trials:
             fp = _fixed_point_jit(m, jnp.asarray(guess), 2, config=config)
@@ -626,17 +708,33 @@ def period2_branch(model, pd, psis, config=DEFAULT_CONFIG, amplitudes=(3e-3, 1e-
     if len(idx):
         i = int(idx[0])
         try:
-            flip = period_doubling_slope(out_psi[i], out_psi[i + 1], out_z[i], model=model,
-                                         k=2, config=config).psi
+            flip = period_doubling_slope(
+                out_psi[i], out_psi[i + 1], out_z[i], model=model, k=2, config=config
+            ).psi
         except ValueError:
             flip = None
-    return {"psi": np.asarray(out_psi), "z": np.stack(out_z), "periods": np.stack(out_T),
-            "max_abs": mx, "stable": stable, "flip_psi": flip}
+    return {
+        "psi": np.asarray(out_psi),
+        "z": np.stack(out_z),
+        "periods": np.stack(out_T),
+        "max_abs": mx,
+        "stable": stable,
+        "flip_psi": flip,
+    }
 
 
 # ---- output helpers for the `gait` command (JSON fields and sweep CSV columns) -----------
-CSV_COLUMNS = ["mult1_re", "mult1_im", "mult2_re", "mult2_im", "mult3_re", "mult3_im",
-               "max_abs_multiplier", "stable", "transverse_result"]
+CSV_COLUMNS = [
+    "mult1_re",
+    "mult1_im",
+    "mult2_re",
+    "mult2_im",
+    "mult3_re",
+    "mult3_im",
+    "max_abs_multiplier",
+    "stable",
+    "transverse_result",
+]
 
 
 def _pick(x, index):
@@ -673,17 +771,20 @@ def stability_json(gm, index=None):
     note = transverse_note(gm, index)
     dis = float(_pick(gm.disagreement, index))
     out: dict[str, Any] = {
-        "multipliers": None if note else [[float(e.real), float(e.imag)] for e in tr]}
+        "multipliers": None if note else [[float(e.real), float(e.imag)] for e in tr]
+    }
     if note:
         out["multipliers_reason"] = note
-    out.update({
-        "multipliers_poincare": [[float(e.real), float(e.imag)] for e in pc],
-        "max_abs_multiplier": float(_pick(gm.max_abs, index)),
-        "stable": bool(_pick(gm.stable, index)),
-        "stability_method": "poincare_jacobian",
-        "transverse_result": result_names(_pick(gm.transverse_result._value, index)),
-        "transverse_disagreement": dis if math.isfinite(dis) else None,
-    })
+    out.update(
+        {
+            "multipliers_poincare": [[float(e.real), float(e.imag)] for e in pc],
+            "max_abs_multiplier": float(_pick(gm.max_abs, index)),
+            "stable": bool(_pick(gm.stable, index)),
+            "stability_method": "poincare_jacobian",
+            "transverse_result": result_names(_pick(gm.transverse_result._value, index)),
+            "transverse_disagreement": dis if math.isfinite(dis) else None,
+        }
+    )
     return out
 
 
@@ -698,8 +799,11 @@ def stability_csv_row(gm, index=None):
     row = []
     for e in tr:
         row += [float(e.real), float(e.imag)] if trusted else ["", ""]
-    return row + [float(_pick(gm.max_abs, index)), bool(_pick(gm.stable, index)),
-                  result_names(_pick(gm.transverse_result._value, index))]
+    return row + [
+        float(_pick(gm.max_abs, index)),
+        bool(_pick(gm.stable, index)),
+        result_names(_pick(gm.transverse_result._value, index)),
+    ]
 
 
 def add_stability_columns(model, gaits, psis, rows):

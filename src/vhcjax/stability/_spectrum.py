@@ -62,9 +62,15 @@ def gait_spectrum(model, gait, *, config=DEFAULT_CONFIG):
     if jnp.ndim(gait.a) == 0:
         return _spectrum_one(model, gait, config)
     B = jnp.shape(gait.a)[0]
-    axes = jax.tree_util.tree_map(lambda x: 0 if (eqx.is_array(x) and jnp.ndim(x) > 0) else None, model)
+    axes = jax.tree_util.tree_map(
+        lambda x: 0 if (eqx.is_array(x) and jnp.ndim(x) > 0) else None, model
+    )
     model = jax.tree_util.tree_map(
-        lambda x: jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:]) if (eqx.is_array(x) and jnp.ndim(x) > 0) else x,
+        lambda x: (
+            jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])
+            if (eqx.is_array(x) and jnp.ndim(x) > 0)
+            else x
+        ),
         model,
     )
     return eqx.filter_vmap(lambda m, g: _spectrum_one(m, g, config), in_axes=(axes, 0))(model, gait)

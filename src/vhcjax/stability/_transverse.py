@@ -2,7 +2,7 @@
 
 Along a gait $q_\\star = (\\theta_\\star, \\phi(\\theta_\\star))$ ($\\theta = q_1$, $\\phi$ the
 virtual holonomic constraint, $n - 1$ components) the transverse coordinates are (6.15)
-$$x_\\perp = (I, y, \\dot y), \\qquad y = q_{2..n} - \\phi(\\theta),\\ 
+$$x_\\perp = (I, y, \\dot y), \\qquad y = q_{2..n} - \\phi(\\theta),\\;
 \\dot y = \\dot q_{2..n} - \\phi'(\\theta)\\dot\\theta,$$
 $2n - 1$ of them, with $I = \\dot\\theta^2 - \\dot\\theta_\\star^2(\\theta)$ the integral
 function (2.52) of the scalar reduced dynamics (6.10)
@@ -107,8 +107,7 @@ def system_matrix(model, E0, theta, dtheta, phi, dphi):
     row_y = jnp.concatenate([jnp.zeros((k, 1 + k), phi.dtype), jnp.eye(k, dtype=phi.dtype)], 1)
     row_dy = jnp.concatenate([hI[:, None], hy, hdy], axis=1)
     A = jnp.concatenate([row_I[None], row_y, row_dy], axis=0)
-    parts = dict(gI=gI, gy=gy, gdy=gdy, hI=hI, hy=hy, hdy=hdy, alpha0=a0, beta0=b0,
-                 ddtheta=ddtheta)
+    parts = dict(gI=gI, gy=gy, gdy=gdy, hI=hI, hy=hy, hdy=hdy, alpha0=a0, beta0=b0, ddtheta=ddtheta)
     return A, parts
 
 
@@ -125,8 +124,9 @@ def L_matrix(model, E0, theta, dtheta, phi, dphi):
     eye = jnp.eye(k, dtype=dt)
     zk = jnp.zeros((k, k + 1), dt)
     row_y = jnp.concatenate([-dphi[:, None], eye, zk], axis=1)
-    row_dy = jnp.concatenate([-(ddphi * dtheta)[:, None], jnp.zeros((k, k), dt),
-                              -dphi[:, None], eye], axis=1)
+    row_dy = jnp.concatenate(
+        [-(ddphi * dtheta)[:, None], jnp.zeros((k, k), dt), -dphi[:, None], eye], axis=1
+    )
     return jnp.concatenate([row_I[None], row_y, row_dy], axis=0)
 
 
@@ -135,10 +135,14 @@ def m_vector(model, E0, theta, dtheta, phi, dphi):
     ddphi = phi_second_derivative(model, E0, theta, phi, dphi)[0]
     a0, b0, c0 = theta_dynamics_coefficients(model, theta, phi, dphi)
     ddtheta = -(b0 * dtheta**2 + c0) / a0
-    return jnp.concatenate([
-        jnp.asarray(dtheta)[None], dphi * dtheta,
-        ddtheta[None], ddphi * dtheta**2 + dphi * ddtheta,
-    ])
+    return jnp.concatenate(
+        [
+            jnp.asarray(dtheta)[None],
+            dphi * dtheta,
+            ddtheta[None],
+            ddphi * dtheta**2 + dphi * ddtheta,
+        ]
+    )
 
 
 def orbit_state(theta, dtheta, phi, dphi):
@@ -230,9 +234,9 @@ def joint_vector_field(t, u, args):
     a0, b0, c0 = theta_dynamics_coefficients(model, theta, phi, dphi)
     ddtheta = -(b0 * dtheta**2 + c0) / a0
     A, _ = system_matrix(model, E0, theta, dtheta, phi, dphi)
-    return jnp.concatenate([
-        jnp.stack([dtheta, ddtheta]), dphi * dtheta, ddphi * dtheta, (A @ Phi).reshape(-1)
-    ])
+    return jnp.concatenate(
+        [jnp.stack([dtheta, ddtheta]), dphi * dtheta, ddphi * dtheta, (A @ Phi).reshape(-1)]
+    )
 
 
 # diffrax traces the field five times (initial step, solver state, step); jitted, the
@@ -240,8 +244,9 @@ def joint_vector_field(t, u, args):
 _joint_vector_field_jit = eqx.filter_jit(joint_vector_field)
 
 
-def transverse_linearization(model, x_plus, x_minus, period, *, rtol=1e-11, atol=1e-11,
-                             max_steps=4096):
+def transverse_linearization(
+    model, x_plus, x_minus, period, *, rtol=1e-11, atol=1e-11, max_steps=4096
+):
     """Multipliers of a gait by transverse linearization (thesis 6.40-6.42, Steps 1-6).
 
     **Arguments:**
@@ -269,19 +274,26 @@ def transverse_linearization(model, x_plus, x_minus, period, *, rtol=1e-11, atol
     phi0 = x_plus[1:n]
     dphi0 = x_plus[n + 1 :] / dtheta0
     theta_end = jnp.asarray(x_minus)[0]
-    u0 = jnp.concatenate([jnp.stack([theta0, dtheta0]), phi0, dphi0,
-                          jnp.eye(r, dtype=x_plus.dtype).reshape(-1)])
+    u0 = jnp.concatenate(
+        [jnp.stack([theta0, dtheta0]), phi0, dphi0, jnp.eye(r, dtype=x_plus.dtype).reshape(-1)]
+    )
 
     def cond(t, y, args, **kwargs):
         return y[0] - theta_end
 
-    event = diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13),
-                          direction=False)
+    event = diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13), direction=False)
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(_joint_vector_field_jit), diffrax.Tsit5(), t0=0.0, t1=2.0 * period,
-        dt0=None, y0=u0, args=(model, E0),
+        diffrax.ODETerm(_joint_vector_field_jit),
+        diffrax.Tsit5(),
+        t0=0.0,
+        t1=2.0 * period,
+        dt0=None,
+        y0=u0,
+        args=(model, E0),
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-        event=event, max_steps=max_steps, throw=False,
+        event=event,
+        max_steps=max_steps,
+        throw=False,
     )
     assert sol.ys is not None and sol.ts is not None  # saved at t1
     uT = sol.ys[-1]
@@ -289,9 +301,15 @@ def transverse_linearization(model, x_plus, x_minus, period, *, rtol=1e-11, atol
     code = RESULTS.where(
         sol.result == diffrax.RESULTS.event_occurred,
         RESULTS.successful,
-        RESULTS.where(sol.result == diffrax.RESULTS.successful, RESULTS.no_impact,
-                      RESULTS.where(sol.result == diffrax.RESULTS.max_steps_reached,
-                                    RESULTS.max_steps_reached, RESULTS.nonfinite)),
+        RESULTS.where(
+            sol.result == diffrax.RESULTS.successful,
+            RESULTS.no_impact,
+            RESULTS.where(
+                sol.result == diffrax.RESULTS.max_steps_reached,
+                RESULTS.max_steps_reached,
+                RESULTS.nonfinite,
+            ),
+        ),
     )
     Phi_T = uT[2 + 2 * k :].reshape(r, r)
     thT, dthT, phT, dphT = split_orbit_state(model, uT)
@@ -321,5 +339,6 @@ def transverse_linearization(model, x_plus, x_minus, period, *, rtol=1e-11, atol
     condition = jnp.where(jnp.isfinite(condition), condition, 1 / jnp.finfo(Lm.dtype).eps)
     transversality = jnp.minimum(_cosine(m_minus, n_minus), _cosine(m_plus, n_plus))
     transversality = jnp.where(jnp.isfinite(transversality), transversality, 0.0)
-    return TransverseLinearization(Xi, ev, Phi_T, dF, dF_TS, P_minus, P_plus, xm, T,
-                                   condition, transversality, code)
+    return TransverseLinearization(
+        Xi, ev, Phi_T, dF, dF_TS, P_minus, P_plus, xm, T, condition, transversality, code
+    )
