@@ -32,7 +32,7 @@ def test_gait_json(capsys):
     )
     out = json.loads(capsys.readouterr().out)
     assert rc == 0
-    # issue 4 adds keys (multipliers); these must be there
+    # the multipliers add keys; these must be there
     assert {
         "result",
         "slope_deg",

@@ -1,4 +1,4 @@
-"""Every numeric flag of every command is checked before any work (issue 21): NaN, inf,
+"""Every numeric flag of every command is checked before any work: NaN, inf,
 negative, zero and out-of-range values give one line on stderr and exit status 2; output
 paths that cannot be written are refused before the work; Ctrl-C ends a run at once.
 

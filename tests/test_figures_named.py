@@ -1,4 +1,4 @@
-"""Every figure function draws what its name says (issue 21): each panel holds data, has
+"""Every figure function draws what its name says: each panel holds data, has
 axis labels with the quantity named by the function, and the title names the case.
 
 Inputs are small synthetic results (the figures' contract is their drawing, not the

@@ -1,4 +1,4 @@
-"""Properties over random models (issue 21): a gait found repeats under simulation; the
+"""Properties over random models: a gait found repeats under simulation; the
 transverse and Poincare multipliers agree or the transverse ones are flagged; no NaN in
 any result; every code is a documented one; invalid models and inputs are `bad_input`.
 
@@ -99,7 +99,7 @@ def test_random_models_gaits_repeat_and_multipliers_hold_or_are_flagged(model):
 
 
 def test_light_hip_heavy_legs_transverse_flagged_poincare_decides():
-    """The case of issue 21 (mH = 0.1, m = 10, 3 deg, shooting gait): dq1 changes sign
+    """The light-hip case (mH = 0.1, m = 10, 3 deg, shooting gait): dq1 changes sign
     along the step, so the transverse linearization (1.3e6, 1.33, 2.4e-4 before) is not
     used; the Poincare Jacobian (-1.065, 0.748, 0.221) decides: unstable."""
     model = vj.CompassGait(m1=10.0, m2=10.0, mH=0.1)

@@ -66,7 +66,7 @@ def test_transverse_equals_poincare_all_slopes_both_families(mults):
         for ev in a:
             assert np.min(np.abs(b - ev)) < 1e-6
     # ... and the checks of the transverse linearization hold for the default model
-    # (issue 21: it is flagged only where its assumptions fail)
+    # (it is flagged only where its assumptions fail)
     assert vhcjax.result_names(mults.transverse_result) == ["successful"] * 6
     assert np.all(np.asarray(mults.disagreement) < S.AGREEMENT_RTOL)
     assert np.all(np.asarray(mults.condition) < S.MAX_CONDITION)
