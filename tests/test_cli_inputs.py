@@ -27,6 +27,8 @@ REQUIRED = {
     "sweep": ["--slope-deg", "2:3:0.5"],
     "bifurcation": ["--slope-deg", "2:3:0.5"],
     "reproduce": ["--out", "/tmp/vhcjax-never-written"],
+    "design": ["--objective", "speed", "--vary", "a"],
+    "atlas": ["--mass-ratio", "1,2", "--length-ratio", "1"],
 }
 #: Checked after parsing by `model_from_args` (messages "--mass-hip must be positive").
 MODEL_FLAGS = {"--slope-deg", "--mass-hip", "--mass-leg", "--a", "--b", "--gravity"}

@@ -4,7 +4,17 @@ over mass and length ratios."""
 import csv
 import math
 
-from ._common import CLIError, add_model_flags, check_finite, model_from_args, print_json, progress
+from ._common import (
+    POSITIVE,
+    CLIError,
+    add_model_flags,
+    check_finite,
+    count,
+    model_from_args,
+    number,
+    print_json,
+    progress,
+)
 
 PARAMETERS = ("mass-hip", "mass-leg", "a", "b", "gravity")
 OBJECTIVES = ("spectral-radius", "flip-slope", "speed")
@@ -17,6 +27,9 @@ ATLAS_CSV = [
     "spectral_radius",
     "reason",
 ]
+
+
+SLOPE_DEG = number(float, lo=0.0, hi=30.0, lo_open=True, hi_open=True)
 
 
 def register(subparsers):
@@ -43,10 +56,12 @@ def register(subparsers):
         help="bounds of varied parameters (SI units), e.g. mass-hip=1:40,a=0.1:0.9; "
         "default mass 1:40 (hip) 1:20 (leg) kg, lengths 0.1:0.9 m, gravity 1:20",
     )
-    p.add_argument("--steps", type=int, default=30, help="iterations at most (default 30)")
+    p.add_argument(
+        "--steps", type=count(1, 10_000), default=30, help="iterations at most (default 30)"
+    )
     p.add_argument(
         "--learning-rate",
-        type=float,
+        type=POSITIVE,
         default=0.05,
         help="Adam rate in the parameters scaled to [0, 1] (default 0.05)",
     )
@@ -82,25 +97,25 @@ def register(subparsers):
     )
     a.add_argument(
         "--slope-deg",
-        type=float,
+        type=float,  # checked by run_atlas like the model flags
         default=None,
         help="report the spectral radius at this slope (degrees, in (0, 30))",
     )
     a.add_argument(
         "--scan-start-deg",
-        type=float,
+        type=SLOPE_DEG,
         default=1.0,
         help="slope where the scan starts (degrees, default 1)",
     )
     a.add_argument(
         "--scan-max-deg",
-        type=float,
+        type=SLOPE_DEG,
         default=12.0,
         help="highest slope scanned for the flip (degrees, default 12)",
     )
     a.add_argument(
         "--scan-step-deg",
-        type=float,
+        type=number(float, lo=0.0, hi=10.0, lo_open=True),
         default=0.5,
         help="slope step of the scan (degrees, default 0.5)",
     )
