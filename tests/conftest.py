@@ -1,7 +1,14 @@
-import jax
-import pytest
+import os
 
-import vhcjax  # noqa: F401  (enables float64)
+# The tests run the library's plain jitted functions; stored programs (a later process
+# loading what an earlier one traced) are tested in `test_programs.py`, which turns them
+# on. Set before vhcjax is imported: subprocesses of the tests inherit it.
+os.environ.setdefault("VHCJAX_PROGRAMS", "off")
+
+import jax  # noqa: E402
+import pytest  # noqa: E402
+
+import vhcjax  # noqa: E402, F401  (enables float64)
 
 
 def pytest_configure(config):

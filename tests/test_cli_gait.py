@@ -137,16 +137,18 @@ for method in ("vhc", "shooting"):
 
 
 def test_compiled_search_kept_on_disk_and_read_back(tmp_path):
-    """`enable_compilation_cache`: the programs of both searches are stored (neither holds
-    a host callback), a second process reads them back (JAX reports two cache hits) and
-    finds the same gaits."""
+    """`enable_compilation_cache`: the programs of both searches are stored, traced
+    (`programs/`) and compiled (neither holds a host callback); a second process reads
+    both back (JAX reports two cache hits) and finds the same gaits."""
     cache = tmp_path / "xla"
-    env = dict(os.environ)
+    env = dict(os.environ, VHCJAX_PROGRAMS="on")
     cmd = [sys.executable, "-c", SCRIPT_CACHE, str(cache)]
     first = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert first.returncode == 0, first.stderr[-2000:]
     stored = sorted(p.name for p in cache.iterdir())
     assert sum(name.startswith("jit__search-") for name in stored) == 2, stored
+    traced = sorted(p.name for p in (cache / "programs").iterdir())
+    assert sum(name.startswith("search-") for name in traced) == 2, traced
     second = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
     assert second.returncode == 0, second.stderr[-2000:]
     assert second.stderr.count("Persistent compilation cache hit for 'jit__search'") == 2

@@ -45,7 +45,8 @@ def default_cache_dir():
 def enable_compilation_cache(directory=None):
     """Keep compiled programs on disk (JAX's persistent compilation cache). vhcjax calls
     this on import; call it to move the cache. It applies to every program of the
-    process that takes XLA 0.1 s or more to compile (a JAX-wide setting).
+    process (a JAX-wide setting). Programs traced by vhcjax are kept there too
+    (`programs/`, see `vhcjax._programs`), so that a later process does not trace them again.
 
     **Arguments:**
 
@@ -59,7 +60,8 @@ def enable_compilation_cache(directory=None):
         return None
     os.makedirs(directory, exist_ok=True)
     jax.config.update("jax_compilation_cache_dir", directory)
-    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.1)
+    # Every program, however quick to compile: a later process then compiles nothing.
+    jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
     jax.config.update("jax_persistent_cache_min_entry_size_bytes", 0)
     return directory
 
@@ -76,6 +78,9 @@ def enable_default_cache():
 
 
 def clear_caches():
-    """Drop the programs compiled in this process (`jax.clear_caches()`), freeing their
-    memory; the next call compiles again (or loads from the disk cache)."""
+    """Drop the programs compiled or loaded in this process (`jax.clear_caches()`), freeing
+    their memory; the next call compiles again (or loads from the disk cache)."""
+    from . import _programs
+
+    _programs._memo.clear()
     jax.clear_caches()

@@ -43,15 +43,14 @@ def _common(p, png_help):
 
 def _gait(args):
     """The gait (fixed point of the step map) from the seed, or a one-line error."""
-    import equinox as eqx
     import jax.numpy as jnp
     import numpy as np
 
     from .._results import result_names
-    from ..hybrid import fixed_point
+    from ..hybrid import fixed_point_jit
 
     model = model_from_args(args)
-    fp = eqx.filter_jit(fixed_point)(model, jnp.asarray(args.gait, float))
+    fp = fixed_point_jit(model, jnp.asarray(args.gait, float))
     if result_names(fp.result) != "successful":
         raise CLIError(
             f"no gait found from --gait {args.gait} at slope {args.slope_deg} deg "

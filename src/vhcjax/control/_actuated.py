@@ -15,6 +15,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, StepResult, flow, step_unchecked
 
@@ -168,4 +169,4 @@ def simulate_closed_loop(
     return ClosedLoopSimulation(steps, first_fail, num_ok, x0, umax, urms)
 
 
-simulate_closed_loop = eqx.filter_jit(simulate_closed_loop)
+simulate_closed_loop = stored_jit(simulate_closed_loop)

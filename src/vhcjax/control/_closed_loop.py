@@ -16,6 +16,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, SolverConfig, flow
 from ..robustness import direction, finish_step, impulse_velocity_jump, swing_from
@@ -331,7 +332,7 @@ def closed_loop_max_push(
 
 # Jitted entry points (models and feedback laws carry array leaves: one compilation
 # serves every slope, weight and torque limit).
-_stabilize_jit = eqx.filter_jit(stabilize)
+_stabilize_jit = stored_jit(stabilize)
 
 
 def _as_weights(model, Q, R, Q_jump):
@@ -372,7 +373,7 @@ def _stabilize(
 
 _stabilize.__doc__ = stabilize.__doc__
 stabilize = _stabilize
-closed_loop_basin = eqx.filter_jit(closed_loop_basin)
-closed_loop_multipliers = eqx.filter_jit(closed_loop_multipliers)
-closed_loop_jacobian = eqx.filter_jit(closed_loop_jacobian)
-closed_loop_max_push = eqx.filter_jit(closed_loop_max_push)
+closed_loop_basin = stored_jit(closed_loop_basin)
+closed_loop_multipliers = stored_jit(closed_loop_multipliers)
+closed_loop_jacobian = stored_jit(closed_loop_jacobian)
+closed_loop_max_push = stored_jit(closed_loop_max_push)

@@ -21,6 +21,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._programs import stored_jit
 from .._results import RESULTS
 from ..stability import guard_normal
 from ._actuated import actuated_vector_field, num_inputs
@@ -72,8 +73,8 @@ def jump_matrix(model, x_minus):
 
 # diffrax traces a vector field several times per solve (initial step, solver state,
 # step); jitted, the later traces reuse the first one's jaxpr (as `vhcjax._transverse`).
-phase_field = eqx.filter_jit(phase_field)
-phase_matrices = eqx.filter_jit(phase_matrices)
+phase_field = stored_jit(phase_field)
+phase_matrices = stored_jit(phase_matrices)
 
 
 class TransverseSystem(eqx.Module):

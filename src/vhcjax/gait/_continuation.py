@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jnp
 
 from .._batching import bucket_size
+from .._programs import stored_jit
 from .._results import RESULTS
 from ._dispatch import _check, _relabel, _search, reference_guess, reference_model
 from ._gait import family_sign
@@ -93,7 +94,7 @@ def _continue(start, end, s_buf, n, z0, sign, method):
     return buf, tbuf
 
 
-_continue_jit = eqx.filter_jit(_continue)
+_continue_jit = stored_jit(_continue)
 
 
 def _run_continuation(start, end, s_values, z0, sign, method):

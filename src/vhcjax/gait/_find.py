@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 
 from .._batching import bucket_size, device_multiple, host_workers, in_chunks, shard_batch
+from .._programs import stored_jit
 from .._results import RESULTS
 from ..solvers import detach
 from ._continuation import _HOMOTOPY_STEPS, _continue, _seed, continue_to_model
@@ -64,7 +65,7 @@ _CHORD_MIN_MEMBERS = 64
 _MIN_SPLIT = 8
 
 
-_search_one_jit = eqx.filter_jit(_search)
+_search_one_jit = stored_jit(_search)
 
 
 def _padded_size(B, mesh):
@@ -92,12 +93,12 @@ def _batched_axes(model):
     )
 
 
-@eqx.filter_jit
+@stored_jit
 def _search_batch(model, guesses, sign, method, solver, axes, chord):
     return _search(model, guesses, sign, method, solver, chord, axes)
 
 
-@eqx.filter_jit
+@stored_jit
 def _search_single(model, guesses, sign, method, solver, chord):
     """`_search` on a batch of one member, unbatched inside."""
     one = jax.tree_util.tree_map(
@@ -113,7 +114,7 @@ def _from_reference(model, sign, method, num=_HOMOTOPY_STEPS):
     return jax.tree_util.tree_map(lambda x: x[-1], gaits)
 
 
-@eqx.filter_jit
+@stored_jit
 def _from_reference_batch(model, sign, method, num, axes):
     return eqx.filter_vmap(lambda m: _from_reference(m, sign, method, num), in_axes=(axes,))(model)
 

@@ -3,11 +3,12 @@
 
 import equinox as eqx
 
+from .._programs import stored_jit
 from ..solvers import damped_newton, damped_newton_batch
 from ._gait import _CHORD_BELOW
 
 
-@eqx.filter_jit
+@stored_jit
 def _evaluate_batch(evaluate, config, axes, model, X, T, family):
     """`evaluate(model, x, family, config, tol) -> (residual, aux)` on a batch."""
     member = lambda m, x, t: evaluate(m, x, family, config, t)  # noqa: E731

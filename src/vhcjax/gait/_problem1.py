@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from .._programs import stored_jit
 from .._results import RESULTS
 from ..solvers import levenberg_marquardt, optax_minimise
 from ._gait import (
@@ -187,7 +188,7 @@ def _phi_field_unit(s, y, args):
 
 
 # diffrax traces the field several times; jitted, the later traces reuse the first jaxpr.
-_phi_field_unit_jit = eqx.filter_jit(_phi_field_unit)
+_phi_field_unit_jit = stored_jit(_phi_field_unit)
 
 
 def _with_tolerance(config, tol):

@@ -5,6 +5,7 @@ import equinox as eqx
 import jax.numpy as jnp
 
 from .. import hybrid as _poincare
+from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, step_unchecked
 from ._gait import _LOOSE_TOL, _RESIDUAL_CAP, SUCCESS_TOL, _label, _make_gait, family_sign
@@ -25,7 +26,7 @@ def complete_guess(model, ab, family="stable"):
     return jnp.stack([ab[0], ab[1], f])
 
 
-complete_guess_jit = eqx.filter_jit(complete_guess)
+complete_guess_jit = stored_jit(complete_guess)
 
 
 def _shoot_eval(model, z, config=DEFAULT_CONFIG, tol=None):

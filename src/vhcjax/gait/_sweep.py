@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 
 from .._batching import bucket_size, host_workers, in_chunks
+from .._programs import stored_jit
 from .._results import RESULTS
 from ._continuation import _run_continuation, _tangent, _unknowns, continue_to_model
 from ._dispatch import _check, _relabel
@@ -119,7 +120,7 @@ def _hermite(ps, pa, za, ta):
     return z
 
 
-@eqx.filter_jit
+@stored_jit
 def _tangents_padded(model, psis, zs, sign, method):
     def one(p, z):
         return _tangent(lambda q: _with_psi(model, q), p, z, sign, method)

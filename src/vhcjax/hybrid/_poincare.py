@@ -13,6 +13,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from .._programs import stored_jit
 from .._results import RESULTS
 from ._simulate import DEFAULT_CONFIG, step_unchecked
 
@@ -115,8 +116,11 @@ def fixed_point(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, config=
     )
 
 
-# Shared jitted entry points: one compile cache per function for the whole library.
-step_map_jit = eqx.filter_jit(step_map)
-jacobian_jit = eqx.filter_jit(jacobian)
-multipliers_jit = eqx.filter_jit(multipliers)
-fixed_point_jit = eqx.filter_jit(fixed_point)
+# Jitted (and stored, see `vhcjax._programs`): one compile cache per function for the
+# whole library. The `_jit` names are aliases.
+step_map = stored_jit(step_map)
+jacobian = stored_jit(jacobian)
+multipliers = stored_jit(multipliers)
+fixed_point = stored_jit(fixed_point)
+step_map_jit, jacobian_jit = step_map, jacobian
+multipliers_jit, fixed_point_jit = multipliers, fixed_point

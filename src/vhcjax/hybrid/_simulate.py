@@ -18,6 +18,7 @@ import optimistix as optx
 
 from .. import trig
 from .._batching import host_workers, in_chunks, round_to_devices, shard_batch
+from .._programs import stored_jit
 from .._results import RESULTS
 from ._event_solve import solve_to_event
 
@@ -387,12 +388,12 @@ def simulate(model, x0, num_steps, *, config=DEFAULT_CONFIG, dense_points=0, thr
 
 # The public entry points are jitted once here (models carry array leaves, so one
 # compilation serves every parameter value); every caller shares these caches.
-step = eqx.filter_jit(step)
-simulate = eqx.filter_jit(simulate)
+step = stored_jit(step)
+simulate = stored_jit(simulate)
 simulate_jit = simulate
 
 
-@eqx.filter_jit
+@stored_jit
 def _simulate_many(model, x0, num_steps, config):
     return jax.vmap(lambda x: _simulate(model, x, num_steps, config))(x0)
 

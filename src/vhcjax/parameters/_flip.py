@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._programs import stored_jit
 from .._results import RESULTS
 from ..gait import find_gait, find_gaits
 from ..hybrid import DEFAULT_CONFIG, jacobian
@@ -29,7 +30,7 @@ def _with_psi(model, psi):
     return eqx.tree_at(lambda m: m.psi, model, jnp.asarray(psi, float))
 
 
-@eqx.filter_jit
+@stored_jit
 def _det_and_radius(model, zs):
     """$\\det(I + J)$ and the spectral radius at the section points `zs` (batched with the
     model's leading axis where it has one)."""

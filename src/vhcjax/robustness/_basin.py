@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import host_workers, map_in_order, round_to_devices, shard_batch
+from .._programs import stored_jit
 from ..hybrid import FAST_CONFIG
 from ._bisection import bisect_threshold
 from ._recovery import CONVERGED, recover
@@ -27,7 +28,7 @@ BASIN_CONFIG = FAST_CONFIG
 """Swing integration used for basin maps: Tsit5, rtol = atol = 1e-8 (`FAST_CONFIG`)."""
 
 
-@eqx.filter_jit
+@stored_jit
 def _recover_chunk(model, z, z_star, num_steps, tol, config):
     x0 = jax.vmap(model.section_to_state)(z)
     return recover(model, x0, model.section_to_state(z_star), num_steps, tol=tol, config=config)

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._programs import stored_jit
 from ..hybrid import DEFAULT_CONFIG, jacobian
 from ._recovery import recover
 
@@ -124,12 +125,12 @@ def contraction(
     )
 
 
-@eqx.filter_jit
+@stored_jit
 def _jacobian_jit(model, z, config):
     return jacobian(model, z, 1, config)
 
 
-@eqx.filter_jit
+@stored_jit
 def _recover_jit(model, x0, x_star, num_steps, config):
     # tol=0: nobody "converges", every recovery runs all steps (a full error history).
     return recover(model, x0, x_star, num_steps, tol=0.0, config=config, stop_when_converged=False)

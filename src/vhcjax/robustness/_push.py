@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, StepResult, classify_solve, flow
 from ._bisection import Threshold, bisect_threshold
@@ -150,7 +151,7 @@ def pulse_step(model, x0, t_push, force, duration, config=DEFAULT_CONFIG, alive=
 
 
 # ---- linear sensitivity, way 1: autodiff through the pushed step -------------------------
-@eqx.filter_jit
+@stored_jit
 def push_sensitivity_autodiff(model, x_star, period, phases, config=DEFAULT_CONFIG):
     """$\\partial x^+/\\partial P$ (shape `(len(phases), 2n, 2)`) of the post-impact state
     after a pushed step, per phase, by forward-mode autodiff at $P = 0$."""
@@ -164,7 +165,7 @@ def push_sensitivity_autodiff(model, x_star, period, phases, config=DEFAULT_CONF
 
 
 # ---- linear sensitivity, way 2: transverse linearization + input term -------------------
-@eqx.filter_jit
+@stored_jit
 def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-11, atol=1e-11):
     """$\\partial\\zeta^+/\\partial P$ (shape `(len(phases), 2n-1, 2)`): the transverse
     coordinates after the next impact per unit hip impulse at each phase, from the
@@ -216,7 +217,7 @@ def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-
 
 
 # ---- largest push survived -----------------------------------------------------------------
-@eqx.filter_jit
+@stored_jit
 def push_recovery(
     model,
     x_star,

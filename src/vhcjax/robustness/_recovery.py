@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 
 from .. import trig
+from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import FAST_CONFIG, step_unchecked
 
@@ -179,7 +180,7 @@ def _recover(
     return Recovery(label, steps, period, result, x, dist, times)
 
 
-recover_jit = eqx.filter_jit(recover)
+recover_jit = stored_jit(recover)
 
 
 def label_names(label):

@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._programs import stored_jit
 from ..hybrid import DEFAULT_CONFIG
 from ..solvers import implicit_outputs, linearised
 
@@ -73,7 +74,7 @@ def _step_jacobian(z, model, config):
     return jax.jacfwd(lambda zz: gait_outputs(model, zz, config)[0])(z)
 
 
-_gait_outputs_jit = eqx.filter_jit(gait_outputs)
+_gait_outputs_jit = stored_jit(gait_outputs)
 
 
 def _implicit(model, z, config):

@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._programs import stored_jit
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, step_unchecked
 from ..models import CompassGait
 from ._bisection import bisect_threshold
@@ -57,7 +58,7 @@ def _first_step_fn(model, h, config):
     return first
 
 
-@eqx.filter_jit
+@stored_jit
 def terrain_recovery(
     model, x_star, h, num_steps=30, tol=1e-4, config=FAST_CONFIG, stop_when_converged=True
 ):
@@ -135,7 +136,7 @@ class GaitSensitivity(eqx.Module):
     c: jax.Array
 
 
-@eqx.filter_jit
+@stored_jit
 def gait_sensitivity_norm(model, x_star, num_steps=40, config=DEFAULT_CONFIG):
     """Gait sensitivity norm (Hobbelen and Wisse 2007) for floor-height disturbances with
     step time as the gait indicator, from the linearized step-to-step map with the floor

@@ -22,6 +22,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._programs import stored_jit
+
 
 def _inexact(x):
     if isinstance(x, float):  # a Python float primal (e.g. `jax.grad(f)(5.0)`)
@@ -87,8 +89,8 @@ def _tangents(flat_tangent, like):
     return jax.tree_util.tree_unflatten(treedef, out)
 
 
-# Plain `eqx.filter_jit`: one compile cache whether called under `jax.grad` or `jax.jacfwd`.
-@eqx.filter_jit
+# One compile cache whether called under `jax.grad` or `jax.jacfwd`.
+@stored_jit
 def _sensitivity(fn, z, params, ok, args, static):
     """$S = \\partial_p o - \\partial_z o\\,(\\partial_z r)^{-1}\\partial_p r$ at $(z, p)$ for
     `fn(z, params, *args) -> (r, o)`, zero where not `ok` or not finite."""
@@ -167,12 +169,12 @@ def linearised(fn, *static):
     return wrapped
 
 
-@eqx.filter_jit
+@stored_jit
 def _apply(fn, args, static):
     return fn(*args, *static)
 
 
-@eqx.filter_jit
+@stored_jit
 def _jacobian(fn, args, static):
     x = _flat(args)
     out = fn(*args, *static)

@@ -34,6 +34,7 @@ from .._batching import (
     round_to_devices,
     shard_batch,
 )
+from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import (
     DEFAULT_CONFIG,
@@ -112,8 +113,6 @@ class GaitMultipliers(eqx.Module):
 AGREEMENT_RTOL = 1e-6
 #: Condition number of $[L; m^T]$ (transverse coordinates) above which they are not used.
 MAX_CONDITION = 1e8
-#: Samples of $\\dot q_1$ along the step for the monotone-phase check.
-PHASE_SAMPLES = 65
 
 
 def _spectral_distance(a, b):
@@ -125,14 +124,23 @@ def _spectral_distance(a, b):
 
 
 def _phase_monotone(model, x0, period, config):
-    """Whether $\\dot q_1$ keeps the sign it has at the start, at `PHASE_SAMPLES` times of
-    the step (with a margin of 1e-6 of its largest modulus)."""
-    ts = jnp.linspace(0.0, 1.0, PHASE_SAMPLES) * period
+    """Whether $\\dot q_1$ keeps the sign it has at the start at every step of the
+    integration over the step (with a margin of 1e-6 of its largest modulus)."""
+    # Saved at the solver's own steps (dense where the motion is fast): diffrax checks
+    # save times given as an array with a host callback, which keeps a program out of
+    # JAX's persistent compilation cache.
+    n = model.n_dof
     sol = flow(
-        model, x0, period * (1 + 1e-12) + 1e-12, config, saveat=diffrax.SaveAt(ts=ts), event=False
+        model,
+        x0,
+        period,
+        config,
+        saveat=diffrax.SaveAt(t0=True, steps=True, fn=lambda t, y, args: y[n]),
+        event=False,
     )
-    assert sol.ys is not None  # saved at `ts`
-    dq1 = sol.ys[:, model.n_dof]
+    assert sol.ys is not None and sol.ts is not None  # saved at every step
+    taken = jnp.isfinite(sol.ts)  # unused slots of the `max_steps` buffer hold inf
+    dq1 = jnp.where(taken, sol.ys, sol.ys[0])
     s = jnp.sign(dq1[0])
     return jnp.all(s * dq1 > 1e-6 * jnp.max(jnp.abs(dq1))) & jnp.all(jnp.isfinite(dq1))
 
@@ -189,7 +197,7 @@ def _gait_multipliers(model, z, config=DEFAULT_CONFIG):
     )
 
 
-@eqx.filter_jit
+@stored_jit
 def _family_multipliers_padded(model, psis, zs, config):
     return jax.vmap(lambda p, z: _gait_multipliers(with_slope(model, p), z, config))(psis, zs)
 
@@ -249,7 +257,7 @@ def gait_multipliers(model, z, config=DEFAULT_CONFIG):
     return jax.tree_util.tree_map(lambda x: x[0], out)
 
 
-_gait_multipliers_jit = eqx.filter_jit(_gait_multipliers)
+_gait_multipliers_jit = stored_jit(_gait_multipliers)
 gait_multipliers_jit = gait_multipliers
 
 
@@ -267,7 +275,7 @@ def finite_difference_jacobian(model, z, k=1, h=1e-6, config=DEFAULT_CONFIG):
     return jax.vmap(col, out_axes=1)(eye)
 
 
-finite_difference_jacobian_jit = eqx.filter_jit(finite_difference_jacobian)
+finite_difference_jacobian_jit = stored_jit(finite_difference_jacobian)
 
 
 # ---- a second Poincare section: q1 = 0 in mid-swing -------------------------------------
@@ -327,7 +335,7 @@ def to_midswing(model, z, config=DEFAULT_CONFIG):
     return xs[1:], ok
 
 
-@eqx.filter_jit
+@stored_jit
 def midswing_multipliers(model, z, config=DEFAULT_CONFIG):
     """Multipliers of the gait through post-impact `z`, computed on the mid-swing section
     $q_1 = 0$ (jacfwd of `midswing_map`). **Returns:** `(multipliers, w, ok)`."""
@@ -341,7 +349,7 @@ def midswing_multipliers(model, z, config=DEFAULT_CONFIG):
 _fixed_point_jit = _poincare.fixed_point_jit
 
 
-@eqx.filter_jit
+@stored_jit
 def _fixed_points_batch(model, psis, z0s, k=1, config=DEFAULT_CONFIG):
     return jax.vmap(lambda p, z: fixed_point(with_slope(model, p), z, k, config=config))(psis, z0s)
 
@@ -566,7 +574,7 @@ class BifurcationDiagram(eqx.Module):
     period_pattern: np.ndarray
 
 
-@eqx.filter_jit
+@stored_jit
 def _long_runs(model, psis, x0s, num_steps, num_record, config):
     def one(p, x0):
         sim = simulate(with_slope(model, p), x0, num_steps, config=config)

@@ -33,6 +33,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from .._programs import stored_jit
 from .._results import RESULTS
 from ..gait import phi_second_derivative, theta_dynamics_coefficients
 
@@ -241,7 +242,7 @@ def joint_vector_field(t, u, args):
 
 # diffrax traces the field five times (initial step, solver state, step); jitted, the
 # later traces reuse the first one's jaxpr.
-_joint_vector_field_jit = eqx.filter_jit(joint_vector_field)
+_joint_vector_field_jit = stored_jit(joint_vector_field)
 
 
 def transverse_linearization(

@@ -1,0 +1,299 @@
+"""Programs kept across processes: `stored_jit`, `eqx.filter_jit` that skips tracing in a
+later process.
+
+JAX's persistent compilation cache (`vhcjax._cache`) spares a later process the XLA
+compile, but not the tracing of the Python code into a program, which for an ODE solve
+with events under `vmap` and `jacfwd` takes seconds. A function wrapped with `stored_jit`
+is exported (`jax.export`) the first time it runs on concrete arrays, and the serialized
+program is kept in the cache directory; a later process with the same vhcjax source, JAX
+version, platform, static arguments and input shapes loads it and runs it, compiled
+code included from the compilation cache, without running the Python again.
+
+Calls under a transformation (`jit`, `vmap`, `grad`: tracers among the arguments),
+arguments spread over several devices, arguments of types defined outside vhcjax and the
+libraries it pins (a model class from a notebook could change under the same name),
+static arguments that print differently in every process (a lambda), or the cache turned
+off (`VHCJAX_CACHE_DIR=off`, or `VHCJAX_PROGRAMS=off` for these programs alone) take the
+plain `eqx.filter_jit` path. So does a program that cannot be exported (one holding a
+host callback, e.g. a `throw=True` check): that is remembered, and it is traced the
+usual way.
+"""
+
+import functools
+import hashlib
+import os
+import pickle
+import re
+import tempfile
+import threading
+
+import equinox as eqx
+import jax
+import jax.core
+import numpy as np
+
+_SUFFIX = ".program"
+_memo = {}  # path of a stored program -> its `_Program`, or None for the plain path
+_lock = threading.RLock()  # reentrant: an export may call another stored function
+_source_hash = None
+
+
+def _source():
+    """A hash of the vhcjax sources: a changed source file never loads an old program."""
+    global _source_hash
+    if _source_hash is None:
+        h = hashlib.sha256()
+        root = os.path.dirname(os.path.abspath(__file__))
+        for dirpath, dirnames, filenames in os.walk(root):
+            dirnames.sort()
+            for name in sorted(filenames):
+                if name.endswith(".py"):
+                    path = os.path.join(dirpath, name)
+                    h.update(os.path.relpath(path, root).encode())
+                    with open(path, "rb") as fh:
+                        h.update(fh.read())
+        _source_hash = h.hexdigest()
+    return _source_hash
+
+
+#: What this process did: programs `exported` (traced and stored), `loaded` (from disk),
+#: `unexportable` (taking the plain path).
+stats = {"exported": 0, "loaded": 0, "unexportable": 0}
+
+
+def program_directory():
+    """Where stored programs go: `programs/` in the compilation cache directory; `None`
+    if that cache is off, or stored programs are (`VHCJAX_PROGRAMS=off`)."""
+    directory = jax.config.values["jax_compilation_cache_dir"]
+    if not directory or os.environ.get("VHCJAX_PROGRAMS", "").strip().lower() == "off":
+        return None
+    return os.path.join(directory, "programs")
+
+
+#: Packages whose types may appear in the arguments of a stored program: their code is
+#: pinned by the source hash and the JAX version of the key. A type from anywhere else (a
+#: model class defined in a notebook, say) could change without the key changing.
+_PINNED = (
+    "vhcjax",
+    "builtins",
+    "numpy",
+    "jax",
+    "jaxlib",
+    "equinox",
+    "diffrax",
+    "optimistix",
+    "lineax",
+)
+
+
+def _pinned(tree):
+    """Whether every node and leaf type of `tree` comes from a `_PINNED` package."""
+    ok = True
+
+    def visit(x):
+        nonlocal ok
+        ok = ok and type(x).__module__.split(".")[0] in _PINNED
+        return False  # descend into every node
+
+    jax.tree_util.tree_flatten(tree, is_leaf=visit)
+    return ok
+
+
+def _named(x):
+    """A module-level function of a `_PINNED` package as its name (stable across
+    processes); anything else as it is."""
+    qualname = getattr(x, "__qualname__", "")
+    module = getattr(x, "__module__", None) or ""
+    if (
+        callable(x)
+        and module.split(".")[0] in _PINNED
+        and "<locals>" not in qualname
+        and not getattr(x, "__closure__", None)
+    ):
+        return f"<function {module}.{qualname}>"
+    return x
+
+
+def _key(fn, args, in_tree, static, leaves):
+    """The file name of a program, or `None` where a stored program could go stale: an
+    argument of a type from outside `_PINNED`, or static arguments without a stable text
+    (a function, printed with its address)."""
+    text = repr(jax.tree_util.tree_map(_named, static))
+    if " at 0x" in text or not _pinned(args):
+        return None
+    parts = [
+        _source(),
+        jax.__version__,
+        jax.default_backend(),
+        str(jax.config.values["jax_enable_x64"]),
+        f"{fn.__module__}.{fn.__qualname__}",
+        str(in_tree),
+        text,
+        repr([(x.shape, str(x.dtype)) for x in leaves]),
+    ]
+    digest = hashlib.sha256("\0".join(parts).encode()).hexdigest()[:40]
+    return f"{fn.__name__.strip('_')}-{digest}{_SUFFIX}"
+
+
+def _skeleton(tree):
+    """`tree` with every array replaced by a 0-d placeholder: pickled, it restores the
+    tree structure in another process (a pickled `PyTreeDef` of an equinox module does
+    not)."""
+    return jax.tree_util.tree_map(lambda x: np.zeros((), x.dtype), tree)
+
+
+class _Program:
+    """A loaded or freshly exported program: flat array inputs to the output pytree."""
+
+    def __init__(self, exported, out_skeleton, out_static):
+        def run(*leaves):
+            return exported.call(*leaves)
+
+        run.__name__ = exported.fun_name.removeprefix("jit_")  # "jit_<fn>" in JAX's logs
+        self._call = jax.jit(run)
+        self._out_tree = jax.tree_util.tree_structure(out_skeleton)
+        self._out_static = out_static
+
+    def __call__(self, leaves):
+        out = self._call(*leaves)
+        return eqx.combine(jax.tree_util.tree_unflatten(self._out_tree, out), self._out_static)
+
+
+#: LAPACK kernels that `jax.export` does not promise to keep across JAX versions. A
+#: stored program is only ever loaded by the JAX version that wrote it (see `_key`).
+_UNCHECKED_TARGETS = (
+    "lapack_sormqr_ffi",
+    "lapack_dormqr_ffi",
+    "lapack_cunmqr_ffi",
+    "lapack_zunmqr_ffi",
+)
+
+
+def _export_with(flat, specs, targets):
+    checks = [jax.export.DisabledSafetyCheck.custom_call(t) for t in targets]
+    return jax.export.export(jax.jit(flat), disabled_checks=checks)(*specs)
+
+
+def _export(fn, in_tree, static, leaves):
+    """Trace `fn` once into an exported program, and the pickled record that restores it."""
+    shapes = {}
+
+    def flat(*xs):  # named after `fn` below: the exported program keeps the name
+        args, kwargs = eqx.combine(jax.tree_util.tree_unflatten(in_tree, xs), static)
+        out_dyn, out_static = eqx.partition(fn(*args, **kwargs), eqx.is_array)
+        shapes["out"] = (out_dyn, out_static)
+        return jax.tree_util.tree_leaves(out_dyn)
+
+    flat.__name__ = fn.__name__
+    specs = [jax.ShapeDtypeStruct(x.shape, x.dtype) for x in leaves]
+    targets = list(_UNCHECKED_TARGETS)
+    try:
+        exported = _export_with(flat, specs, targets)
+    except ValueError as err:  # another kernel without a cross-version guarantee: allow it
+        more = re.findall(r"custom_call @(\w+)\(", str(err))
+        if not more:
+            raise
+        exported = _export_with(flat, specs, targets + more)
+    out_dyn, out_static = shapes["out"]
+    record = {
+        "exported": bytes(exported.serialize()),
+        "skeleton": _skeleton(out_dyn),
+        "static": out_static,
+    }
+    return _Program(exported, record["skeleton"], out_static), record
+
+
+def _load(path):
+    with open(path, "rb") as fh:
+        record = pickle.load(fh)
+    if record["exported"] is None:  # not exportable: the plain path
+        return None
+    exported = jax.export.deserialize(bytearray(record["exported"]))
+    return _Program(exported, record["skeleton"], record["static"])
+
+
+def _store(path, record):
+    os.makedirs(os.path.dirname(path), exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=os.path.dirname(path), suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            pickle.dump(record, fh, protocol=pickle.HIGHEST_PROTOCOL)
+        os.replace(tmp, path)  # atomic: a concurrent reader sees all or nothing
+    except BaseException:
+        os.unlink(tmp)
+        raise
+
+
+def _plain_call(leaves):
+    """Whether a call must take the `filter_jit` path: traced, or spread over devices."""
+    for x in leaves:
+        if isinstance(x, jax.core.Tracer):
+            return True
+        sharding = getattr(x, "sharding", None)
+        if sharding is not None and len(sharding.device_set) > 1:
+            return True
+    return False
+
+
+def stored_jit(fn):
+    """`eqx.filter_jit(fn)` whose programs are also kept on disk (see the module docstring).
+
+    `fn` takes pytrees of arrays and static values (as with `filter_jit`) and returns a
+    pytree whose non-array leaves depend only on the static arguments.
+    """
+    jitted = eqx.filter_jit(fn)
+    if "<locals>" in fn.__qualname__ or getattr(fn, "__closure__", None):
+        # A closure's captured values are not arguments: they cannot enter the key.
+        raise TypeError(f"stored_jit needs a module-level function, not {fn.__qualname__}")
+
+    @functools.wraps(fn)
+    def call(*args, **kwargs):
+        directory = program_directory()
+        if directory is None:
+            return jitted(*args, **kwargs)
+        dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
+        leaves, in_tree = jax.tree_util.tree_flatten(dynamic)
+        if _plain_call(leaves):
+            return jitted(*args, **kwargs)
+        key = _key(fn, (args, kwargs), in_tree, static, leaves)
+        if key is None:
+            return jitted(*args, **kwargs)
+        path = os.path.join(directory, key)
+        program = _memo.get(path, False)
+        if program is False:
+            with _lock:
+                program = _memo.get(path, False)
+                if program is False:
+                    program = _obtain(fn, path, in_tree, static, leaves)
+                    _memo[path] = program
+        if program is None:
+            return jitted(*args, **kwargs)
+        return program(leaves)
+
+    call.plain = jitted  # pyright: ignore[reportAttributeAccessIssue]  (the filter_jit path)
+    return call
+
+
+def _obtain(fn, path, in_tree, static, leaves):
+    """The program stored at `path`, else a new export stored there; `None` if `fn`
+    cannot be exported (its calls then take the plain path)."""
+    if os.path.exists(path):
+        try:
+            program = _load(path)
+            stats["loaded" if program is not None else "unexportable"] += 1
+            return program
+        except Exception:  # unreadable or from an incompatible writer: export again
+            pass
+    try:
+        program, record = _export(fn, in_tree, static, leaves)
+        stats["exported"] += 1
+    except ImportError:  # no serializer (flatbuffers) installed: nothing to remember
+        return None
+    except Exception:  # e.g. a host callback, which jax.export cannot serialize
+        program, record = None, {"exported": None}  # remembered: no export next time
+        stats["unexportable"] += 1
+    try:
+        _store(path, record)
+    except (OSError, pickle.PicklingError, TypeError, AttributeError):
+        pass  # not storable (read-only cache, unpicklable static output): used in-process
+    return program

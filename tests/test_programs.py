@@ -1,0 +1,149 @@
+"""Stored programs (`vhcjax._programs`): a later process loads the traced program instead of
+tracing again, with the same numbers; anything that could go stale takes the plain path."""
+
+import json
+import os
+import subprocess
+import sys
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import vhcjax as vj
+from vhcjax import _programs
+
+SCRIPT = """
+import json, math
+import numpy as np
+import vhcjax as vj
+from vhcjax import _programs
+m = vj.CompassGait(psi=math.radians(3.0))
+z = np.array([0.2187, -1.0924, -0.3774])
+sim = vj.simulate(m, m.section_to_state(z), 3)
+ev = vj.poincare_multipliers(m, z)
+print(json.dumps({"x": np.asarray(sim.steps.x_plus).tolist(),
+                  "p": [[complex(v).real, complex(v).imag] for v in np.asarray(ev)],
+                  "stats": _programs.stats}))
+"""
+
+
+def _run(env):
+    out = subprocess.run(
+        [sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=900
+    )
+    assert out.returncode == 0, out.stderr[-2000:]
+    return json.loads(out.stdout.splitlines()[-1])
+
+
+def test_a_second_process_loads_the_programs_and_gets_the_same_numbers(tmp_path):
+    env = dict(os.environ, VHCJAX_CACHE_DIR=str(tmp_path / "cache"), VHCJAX_PROGRAMS="on")
+    first = _run(env)
+    assert first["stats"]["exported"] >= 2 and first["stats"]["loaded"] == 0
+    second = _run(env)
+    # nothing traced again: the simulation and the multipliers come from disk
+    assert second["stats"]["exported"] == 0 and second["stats"]["loaded"] >= 2
+    assert second["x"] == first["x"] and second["p"] == first["p"]
+    # and they are the numbers of the plain path (a third process without stored programs)
+    plain = _run(dict(env, VHCJAX_PROGRAMS="off"))
+    assert plain["stats"] == {"exported": 0, "loaded": 0, "unexportable": 0}
+    np.testing.assert_allclose(plain["x"], first["x"], rtol=0, atol=1e-12)
+    np.testing.assert_allclose(plain["p"], first["p"], rtol=0, atol=1e-10)
+
+
+@pytest.fixture
+def store(tmp_path, monkeypatch):
+    """A private program directory for this test, nothing loaded yet."""
+    monkeypatch.setattr(_programs, "program_directory", lambda: str(tmp_path / "programs"))
+    monkeypatch.setattr(_programs, "_memo", {})
+    return tmp_path / "programs"
+
+
+def _counts(monkeypatch):
+    counts = {"exported": 0, "loaded": 0, "unexportable": 0}
+    monkeypatch.setattr(_programs, "stats", counts)
+    return counts
+
+
+@_programs.stored_jit
+def _double_map(model, z, config):
+    return vj.step_map(model, z, config=config), 2 * z
+
+
+def test_a_new_source_misses(store, monkeypatch):
+    counts = _counts(monkeypatch)
+    model, z = vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774])
+    for fn in (vj.hybrid.step_map_jit,):
+        a = fn(model, z)
+        assert counts["exported"] == 1 and len(os.listdir(store)) == 1
+        # the same function after an edit of the library: another key, a new export
+        monkeypatch.setattr(_programs, "_source_hash", "changed source")
+        b = fn(model, z)
+        assert counts["exported"] == 2 and len(os.listdir(store)) == 2
+        np.testing.assert_array_equal(np.asarray(a.z_next), np.asarray(b.z_next))
+
+
+def test_types_from_outside_the_library_are_not_stored(store, monkeypatch):
+    counts = _counts(monkeypatch)
+
+    class MyWalker(vj.CompassGait):  # defined here: could change under the same name
+        pass
+
+    z = jnp.array([0.2187, -1.0924, -0.3774])
+    a = vj.hybrid.step_map_jit(MyWalker(), z)
+    b = vj.hybrid.step_map_jit(vj.CompassGait(), z)
+    assert counts == {"exported": 1, "loaded": 0, "unexportable": 0}  # only the library's
+    np.testing.assert_allclose(np.asarray(a.z_next), np.asarray(b.z_next), rtol=0, atol=0)
+    # a function defined outside the library is rejected the same way
+    assert _programs._key(_double_map, ((print,), {}), None, (lambda x: x,), []) is None
+
+
+def test_transformed_calls_take_the_plain_path(store, monkeypatch):
+    counts = _counts(monkeypatch)
+    model, z = vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774])
+    direct = vj.hybrid.step_map_jit(model, z).z_next
+    jitted = jax.jit(lambda z: vj.hybrid.step_map_jit(model, z).z_next)(z)
+    batched = jax.vmap(lambda z: vj.hybrid.step_map_jit(model, z).z_next)(z[None])
+    jac = jax.jacfwd(lambda z: vj.hybrid.step_map_jit(model, z).z_next)(z)
+    assert counts["exported"] == 1 and len(os.listdir(store)) == 1  # the direct call only
+    np.testing.assert_allclose(np.asarray(jitted), np.asarray(direct), rtol=0, atol=1e-14)
+    np.testing.assert_allclose(np.asarray(batched[0]), np.asarray(direct), rtol=0, atol=1e-14)
+    assert jac.shape == (3, 3) and np.all(np.isfinite(np.asarray(jac)))
+
+
+def test_a_program_with_a_host_callback_is_remembered_as_plain(store, monkeypatch):
+    counts = _counts(monkeypatch)
+    model = vj.CompassGait()
+    x0 = jnp.array([0.2187, -0.3375, -1.0924, -0.3774])
+    res = vj.step(model, x0)  # throw=True: an error check, a host callback
+    assert counts["unexportable"] == 1 and counts["exported"] == 0
+    assert len(os.listdir(store)) == 1  # the marker, so no later process tries again
+    with pytest.raises(Exception):  # noqa: B017  (the check raises whatever equinox raises)
+        vj.step(model, jnp.array([0.2, -0.3, 50.0, 50.0]))  # the check still fires
+    assert bool(res.result == vj.RESULTS.successful)
+
+
+def test_closures_are_refused():
+    def outer(k):
+        return _programs.stored_jit(lambda x: k * x)
+
+    with pytest.raises(TypeError, match="module-level"):
+        outer(2.0)
+
+
+def test_off_stores_nothing(tmp_path, monkeypatch):
+    monkeypatch.setenv("VHCJAX_PROGRAMS", "off")
+    assert _programs.program_directory() is None
+    counts = _counts(monkeypatch)
+    vj.hybrid.step_map_jit(vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774]))
+    assert counts == {"exported": 0, "loaded": 0, "unexportable": 0}
+
+
+def test_outputs_keep_their_types(store):
+    out = vj.hybrid.step_map_jit(vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774]))
+    plain = vj.hybrid.step_map_jit.plain(vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774]))
+    assert type(out) is type(plain)
+    assert jax.tree_util.tree_structure(out) == jax.tree_util.tree_structure(plain)
+    assert eqx.tree_equal(out, plain, rtol=0, atol=1e-14)
