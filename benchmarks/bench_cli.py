@@ -2,7 +2,8 @@
 the same jobs in the same run.
 
 - `vhcjax gait --slope-deg 3 --json` (gait and multipliers): first run with an empty
-  compilation cache, then a second run; against a scipy script (VHC search by `fsolve`,
+  compilation cache, then a second run, and a second run without stored programs
+  (`VHCJAX_PROGRAMS=off`: compiled code from the cache, but traced again); against a scipy script (VHC search by `fsolve`,
   multipliers from a central-difference Jacobian of the `solve_ivp` step map), interpreter
   start included on both sides.
 - `vhcjax sweep --slope-deg 0.5:4.3:STEP --family stable --csv FILE` at N1 and N2 slopes
@@ -100,13 +101,26 @@ def main(argv=None):
     # gait + multipliers: first run (empty cache), second run; scipy script
     first, _ = _timed(vhcjax + ["gait", "--slope-deg", "3", "--json", "--quiet"], env, work)
     second, _ = _timed(vhcjax + ["gait", "--slope-deg", "3", "--json", "--quiet"], env, work)
+    # the same second run without stored programs (compiled code from the cache, traced
+    # anew); its programs are compiled differently, so a first run fills the cache
+    for _ in range(2):
+        unstored, _ = _timed(
+            vhcjax + ["gait", "--slope-deg", "3", "--json", "--quiet"],
+            dict(env, VHCJAX_PROGRAMS="off"),
+            work,
+        )
     sp, _ = _timed([sys.executable, "-c", SCIPY_GAIT.format(here=HERE)], env, work)
     rows["gait"] = dict(
-        first_s=first, second_s=second, scipy_s=sp, first_ratio=first / sp, second_ratio=second / sp
+        first_s=first,
+        second_s=second,
+        second_unstored_s=unstored,
+        scipy_s=sp,
+        first_ratio=first / sp,
+        second_ratio=second / sp,
     )
     print(
-        f"gait --json: first {first:.1f} s, second {second:.1f} s, scipy {sp:.2f} s "
-        f"({first / sp:.0f}x, {second / sp:.1f}x)",
+        f"gait --json: first {first:.1f} s, second {second:.1f} s (without stored programs "
+        f"{unstored:.1f} s), scipy {sp:.2f} s ({first / sp:.0f}x, {second / sp:.1f}x)",
         flush=True,
     )
 

@@ -8,6 +8,11 @@ is linear in B); throughput is gaits per second of run time, compile time report
 separately (first call minus a warm call, JAX's caches cleared before each entry).
 
     python benchmarks/bench_gait_search.py [--cpu-devices 2] [--scipy-procs 2] [--quick] [--json OUT]
+    python benchmarks/bench_gait_search.py --solvers newton,optimistix --sizes 1000
+
+`--solvers` compares the library's batched Newton (one loop over the whole batch, each
+member stopping at its own convergence; the default) with optimistix's Newton under
+`vmap` (`find_gaits(..., solver="optimistix")`), the same problems in the same run.
 
 On a CPU vhcjax runs the chunks of a large batch on all cores at once; the plain scipy
 baseline runs on one. `--scipy-procs N` also times scipy with its members split over N
@@ -33,6 +38,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--sizes", default="1,10,100,1000")
     ap.add_argument("--methods", default="vhc,shooting")
+    ap.add_argument("--solvers", default="newton", help="newton (default), optimistix, or both")
     ap.add_argument("--scipy-max", type=int, default=20, help="members solved by scipy (20)")
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--quick", action="store_true", help="B = 1, 10 only; 3 scipy members")
@@ -76,95 +82,100 @@ def main(argv=None):
         pool.starmap(_scipy_one, [("vhc", math.radians(3.0), (0.20, -1.0))] * args.scipy_procs)
     rows = []
     model = vj.CompassGait()
-    for method in args.methods.split(","):
-        for B in sizes:
-            deg = np.linspace(2.5, 3.5, B) if B > 1 else np.array([3.0])
-            psi = np.radians(deg)
-            seeds = np.tile([0.20, -1.0], (B, 1))
-            if method == "shooting":
-                seeds = np.stack(
-                    [
-                        np.asarray(G.complete_guess(vj.CompassGait(psi=p), s, "stable"))
-                        for p, s in zip(psi[:1], seeds[:1])
-                    ]
-                )
-                seeds = np.tile(seeds[0], (B, 1))
+    cases = [
+        (m, s, B) for m in args.methods.split(",") for s in args.solvers.split(",") for B in sizes
+    ]
+    for method, solver, B in cases:
+        deg = np.linspace(2.5, 3.5, B) if B > 1 else np.array([3.0])
+        psi = np.radians(deg)
+        seeds = np.tile([0.20, -1.0], (B, 1))
+        if method == "shooting":
+            seeds = np.stack(
+                [
+                    np.asarray(G.complete_guess(vj.CompassGait(psi=p), s, "stable"))
+                    for p, s in zip(psi[:1], seeds[:1])
+                ]
+            )
+            seeds = np.tile(seeds[0], (B, 1))
 
-            def run():
-                g = G.find_gaits(model, jnp.asarray(seeds), "stable", method, psi=jnp.asarray(psi))
-                jax.block_until_ready(g)
-                return g
+        def run():
+            g = G.find_gaits(
+                model, jnp.asarray(seeds), "stable", method, psi=jnp.asarray(psi), solver=solver
+            )
+            jax.block_until_ready(g)
+            return g
 
-            # Each entry's compile time from cold caches, as in a fresh process (without
-            # this, an entry would reuse traces of the functions the ones before it share):
-            # (the disk cache is off in this benchmark, see `main`).
-            vj.clear_caches()
+        # Each entry's compile time from cold caches, as in a fresh process (without
+        # this, an entry would reuse traces of the functions the ones before it share):
+        # (the disk cache is off in this benchmark, see `main`).
+        vj.clear_caches()
+        t0 = time.perf_counter()
+        g = run()
+        first = time.perf_counter() - t0
+        times = []
+        for _ in range(args.repeats):
             t0 = time.perf_counter()
             g = run()
-            first = time.perf_counter() - t0
-            times = []
-            for _ in range(args.repeats):
-                t0 = time.perf_counter()
-                g = run()
-                times.append(time.perf_counter() - t0)
-            t_run = min(times)
-            ok = np.asarray(g.result._value == vj.RESULTS.successful._value)
-            # scipy on a subset
-            n_sp = min(B, args.scipy_max)
+            times.append(time.perf_counter() - t0)
+        t_run = min(times)
+        ok = np.asarray(g.result._value == vj.RESULTS.successful._value)
+        # scipy on a subset
+        n_sp = min(B, args.scipy_max)
+        t0 = time.perf_counter()
+        sp_ok, agree = [], []
+        for i in range(n_sp):
+            par = ref.Params(psi=float(psi[i]))
+            if method == "vhc":
+                x, good = scipy_gait.vhc_search(par, seeds[i])
+                mine = np.array([float(g.a[i]), float(g.b[i])])
+            else:
+                x, good = scipy_gait.shooting_search(par, seeds[i])
+                mine = np.array([float(g.a[i]), float(g.b[i]), float(g.f[i])])
+            sp_ok.append(good)
+            if good and ok[i]:
+                agree.append(float(np.max(np.abs(x - mine))))
+        t_sp = (time.perf_counter() - t0) / n_sp
+        t_sp_pool = None
+        if pool is not None:  # the same members, split over the pool's processes
             t0 = time.perf_counter()
-            sp_ok, agree = [], []
-            for i in range(n_sp):
-                par = ref.Params(psi=float(psi[i]))
-                if method == "vhc":
-                    x, good = scipy_gait.vhc_search(par, seeds[i])
-                    mine = np.array([float(g.a[i]), float(g.b[i])])
-                else:
-                    x, good = scipy_gait.shooting_search(par, seeds[i])
-                    mine = np.array([float(g.a[i]), float(g.b[i]), float(g.f[i])])
-                sp_ok.append(good)
-                if good and ok[i]:
-                    agree.append(float(np.max(np.abs(x - mine))))
-            t_sp = (time.perf_counter() - t0) / n_sp
-            t_sp_pool = None
-            if pool is not None:  # the same members, split over the pool's processes
-                t0 = time.perf_counter()
-                pool.starmap(_scipy_one, [(method, float(psi[i]), seeds[i]) for i in range(n_sp)])
-                t_sp_pool = (time.perf_counter() - t0) / n_sp
-            row = dict(
-                method=method,
-                B=B,
-                jax_s=t_run,
-                jax_gaits_per_s=B / t_run,
-                compile_s=max(first - t_run, 0.0),
-                jax_success=float(ok.mean()),
-                scipy_s_per_gait=t_sp,
-                scipy_gaits_per_s=1.0 / t_sp,
-                scipy_success=float(np.mean(sp_ok)),
-                ratio=(B / t_run) * t_sp,
-                max_diff_vs_scipy=max(agree) if agree else None,
+            pool.starmap(_scipy_one, [(method, float(psi[i]), seeds[i]) for i in range(n_sp)])
+            t_sp_pool = (time.perf_counter() - t0) / n_sp
+        row = dict(
+            method=method,
+            solver=solver,
+            B=B,
+            jax_s=t_run,
+            jax_gaits_per_s=B / t_run,
+            compile_s=max(first - t_run, 0.0),
+            jax_success=float(ok.mean()),
+            scipy_s_per_gait=t_sp,
+            scipy_gaits_per_s=1.0 / t_sp,
+            scipy_success=float(np.mean(sp_ok)),
+            ratio=(B / t_run) * t_sp,
+            max_diff_vs_scipy=max(agree) if agree else None,
+        )
+        if t_sp_pool is not None:
+            row.update(
+                scipy_procs=args.scipy_procs,
+                scipy_pool_gaits_per_s=1.0 / t_sp_pool,
+                ratio_vs_pool=(B / t_run) * t_sp_pool,
             )
-            if t_sp_pool is not None:
-                row.update(
-                    scipy_procs=args.scipy_procs,
-                    scipy_pool_gaits_per_s=1.0 / t_sp_pool,
-                    ratio_vs_pool=(B / t_run) * t_sp_pool,
-                )
-            rows.append(row)
+        rows.append(row)
+        print(
+            f"{method:8s} {solver:10s} B={B:5d}  vhcjax {row['jax_gaits_per_s']:9.1f} gaits/s "
+            f"(compile {row['compile_s']:6.1f} s, success {row['jax_success']:.3f})  "
+            f"scipy {row['scipy_gaits_per_s']:7.2f} gaits/s (success "
+            f"{row['scipy_success']:.2f})  ratio {row['ratio']:8.1f}  "
+            f"max |diff| {row['max_diff_vs_scipy']}",
+            flush=True,
+        )
+        if t_sp_pool is not None:
             print(
-                f"{method:8s} B={B:5d}  vhcjax {row['jax_gaits_per_s']:9.1f} gaits/s "
-                f"(compile {row['compile_s']:6.1f} s, success {row['jax_success']:.3f})  "
-                f"scipy {row['scipy_gaits_per_s']:7.2f} gaits/s (success "
-                f"{row['scipy_success']:.2f})  ratio {row['ratio']:8.1f}  "
-                f"max |diff| {row['max_diff_vs_scipy']}",
+                f"{'':8s}          scipy on {args.scipy_procs} processes "
+                f"{row['scipy_pool_gaits_per_s']:7.2f} gaits/s  ratio "
+                f"{row['ratio_vs_pool']:8.1f}",
                 flush=True,
             )
-            if t_sp_pool is not None:
-                print(
-                    f"{'':8s}          scipy on {args.scipy_procs} processes "
-                    f"{row['scipy_pool_gaits_per_s']:7.2f} gaits/s  ratio "
-                    f"{row['ratio_vs_pool']:8.1f}",
-                    flush=True,
-                )
     if pool is not None:
         pool.close()
 

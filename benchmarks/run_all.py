@@ -166,6 +166,13 @@ def _rows(name, res):
                 "cached",
             ),
             (
+                "the same, without stored programs (`VHCJAX_PROGRAMS=off`)",
+                f"{g['second_unstored_s']:.1f} s",
+                f"{g['scipy_s']:.2f} s (script)",
+                f"{g['second_unstored_s'] / g['scipy_s']:.1f}x slower",
+                "compiled code cached, traced again",
+            ),
+            (
                 f"`vhcjax sweep` with `--csv`, {sw['n1']:,} and {sw['n2']:,} slopes "
                 f"({sw['found2']:,} found)",
                 f"{sw['per_gait_ms']:.2f} ms/gait + {sw['fixed_s']:.1f} s",

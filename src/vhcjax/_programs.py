@@ -30,6 +30,7 @@ import threading
 import equinox as eqx
 import jax
 import jax.core
+import jax.numpy as jnp
 import numpy as np
 
 _SUFFIX = ".program"
@@ -155,6 +156,13 @@ class _Program:
         self._out_static = out_static
 
     def __call__(self, leaves):
+        # One signature for every call: weak types and uncommitted arrays would each make
+        # the wrapper compile again (the program itself wants plain dtypes on one device).
+        device = next(
+            (next(iter(x.sharding.device_set)) for x in leaves if getattr(x, "committed", False)),
+            jax.devices()[0],
+        )
+        leaves = [jax.device_put(jnp.asarray(x, dtype=x.dtype), device) for x in leaves]
         out = self._call(*leaves)
         return eqx.combine(jax.tree_util.tree_unflatten(self._out_tree, out), self._out_static)
 
