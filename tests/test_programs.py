@@ -23,7 +23,7 @@ from vhcjax import _programs
 m = vj.CompassGait(psi=math.radians(3.0))
 z = np.array([0.2187, -1.0924, -0.3774])
 sim = vj.simulate(m, m.section_to_state(z), 3)
-ev = vj.poincare_multipliers(m, z)
+ev = vj.hybrid.multipliers_jit(m, z)
 print(json.dumps({"x": np.asarray(sim.steps.x_plus).tolist(),
                   "p": [[complex(v).real, complex(v).imag] for v in np.asarray(ev)],
                   "stats": _programs.stats}))
@@ -69,7 +69,7 @@ def _counts(monkeypatch):
 
 @_programs.stored_jit
 def _double_map(model, z, config):
-    return vj.step_map(model, z, config=config), 2 * z
+    return vj.hybrid.step_map_jit(model, z, config=config), 2 * z
 
 
 def test_a_new_source_misses(store, monkeypatch):

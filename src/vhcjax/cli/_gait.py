@@ -214,8 +214,8 @@ def _run_kneed_gait(args):
     import jax.numpy as jnp
     import numpy as np
 
-    from .. import fixed_point, poincare_multipliers
     from .._results import result_names
+    from ..hybrid import fixed_point_jit as fixed_point, multipliers_jit as poincare_multipliers
 
     if args.method != "shooting":
         raise CLIError("the kneed walker's gaits are found by shooting: use --method shooting")

@@ -116,11 +116,9 @@ def fixed_point(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, config=
     )
 
 
-# Jitted (and stored, see `vhcjax._programs`): one compile cache per function for the
-# whole library. The `_jit` names are aliases.
-step_map = stored_jit(step_map)
-jacobian = stored_jit(jacobian)
-multipliers = stored_jit(multipliers)
-fixed_point = stored_jit(fixed_point)
-step_map_jit, jacobian_jit = step_map, jacobian
-multipliers_jit, fixed_point_jit = multipliers, fixed_point
+# Shared jitted entry points (stored, see `vhcjax._programs`): one compile cache per
+# function for the whole library.
+step_map_jit = stored_jit(step_map)
+jacobian_jit = stored_jit(jacobian)
+multipliers_jit = stored_jit(multipliers)
+fixed_point_jit = stored_jit(fixed_point)
