@@ -5,7 +5,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._batching import bucket_size
 from .._programs import stored_jit
 from .._results import RESULTS
 from ._dispatch import _check, _relabel, _search, reference_guess, reference_model
@@ -97,18 +96,43 @@ def _continue(start, end, s_buf, n, z0, sign, method):
 _continue_jit = stored_jit(_continue)
 
 
+#: Points per call of the compiled continuation: every length of continuation runs as
+#: calls of this one size, so one program serves them all.
+_CHUNK = 16
+
+
 def _run_continuation(start, end, s_values, z0, sign, method):
-    """Host wrapper: pad `s_values` to a power of two (fewer recompiles), run, unpad."""
+    """Host wrapper: run `_continue` over `s_values` in calls of `_CHUNK` points. Each call
+    after the first starts again from the last point solved (re-solved as its first entry,
+    dropped), so the result is that of one long loop.
+    """
     import numpy as np
 
     s_values = np.asarray(s_values, dtype=float)
     n = len(s_values)
-    s_buf = np.concatenate([s_values, np.full(bucket_size(n, 16) - n, s_values[-1])])
-    # `n` traced: every length up to the buffer size shares one compilation.
-    gaits, tangents = _continue_jit(
-        start, end, jnp.asarray(s_buf), jnp.asarray(n), z0, sign, method
-    )
-    return jax.tree_util.tree_map(lambda x: x[:n], gaits), tangents[:n]
+    parts, tangent_parts = [], []
+    s_start, z_start, done = s_values[0], jnp.asarray(z0), 0
+    while done < n:
+        first = done == 0
+        new = s_values[done : done + (_CHUNK if first else _CHUNK - 1)]
+        s_run = new if first else np.concatenate([[s_start], new])
+        k = len(s_run)
+        s_buf = np.concatenate([s_run, np.full(_CHUNK - k, s_run[-1])])
+        # `k` traced: a short last call shares the program.
+        gaits, tangents = _continue_jit(
+            start, end, jnp.asarray(s_buf), jnp.asarray(k), z_start, sign, method
+        )
+        skip = 0 if first else 1
+        gaits = jax.tree_util.tree_map(lambda x: x[skip:k], gaits)
+        parts.append(gaits)
+        tangent_parts.append(tangents[skip:k])
+        ok = np.flatnonzero(np.asarray(gaits.result._value) == RESULTS.successful._value)
+        if ok.size:
+            last = jax.tree_util.tree_map(lambda x: x[ok[-1]], gaits)
+            s_start, z_start = new[ok[-1]], _unknowns(last, method)
+        done += len(new)
+    gaits = jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
+    return gaits, jnp.concatenate(tangent_parts)
 
 
 _HOMOTOPY_STEPS = 16
