@@ -51,6 +51,19 @@ def test_gait_json(capsys):
     p = out["params"]
     assert out["x0"] == [p["a"], p["e"], p["b"], p["f"]]
     np.testing.assert_allclose(out["x0"][:2], [0.218669, -0.323389], atol=6e-7)
+    # by default the multipliers of the Poincare-map Jacobian (autodiff) only; they are
+    # those of central differences of the step map
+    assert out["multipliers"] is None and out["transverse_result"] == "not_requested"
+    assert "--transverse" in out["multipliers_reason"]
+    z = np.array([out["x0"][0], out["x0"][2], out["x0"][3]])
+    fd = np.linalg.eigvals(
+        np.asarray(vj.stability.finite_difference_jacobian_jit(vj.CompassGait(), z))
+    )
+    ev = np.array(out["multipliers_poincare"])
+    np.testing.assert_allclose(
+        sorted(np.abs(ev[:, 0] + 1j * ev[:, 1])), sorted(np.abs(fd)), atol=1e-6
+    )
+    assert out["max_abs_multiplier"] == pytest.approx(max(np.abs(fd)), abs=1e-6)
 
 
 @pytest.mark.parametrize(
@@ -91,6 +104,7 @@ def test_sweep_csv_png(tmp_path, capsys):
             str(csv_path),
             "--png",
             str(png_path),
+            "--transverse",
         ]
     )
     assert rc == 0
@@ -114,6 +128,13 @@ def test_sweep_csv_png(tmp_path, capsys):
         "speed",
     ]
     assert "mult1_re" in rows[0] and "stable" in rows[0]
+    # two ways: the transverse linearization (asked for) and the Poincare-map Jacobian
+    for r in rows:
+        assert r["transverse_result"] == "successful"
+        for k in range(1, 4):
+            for part in ("re", "im"):
+                t, p = float(r[f"mult{k}_{part}"]), float(r[f"pmult{k}_{part}"])
+                assert abs(t - p) < 1e-6 * float(r["max_abs_multiplier"])
     # the stable family is stable at these slopes, the unstable one is not
     assert all(r["stable"] in ("True", "true", "1") for r in rows if r["family"] == "stable")
     assert all(r["stable"] in ("False", "false", "0") for r in rows if r["family"] == "unstable")

@@ -16,7 +16,8 @@ import pytest
 from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 import vhcjax as vj
-from vhcjax.stability import AGREEMENT_RTOL, gait_multipliers_jit, stability_json
+from vhcjax.cli._multiplier_fields import stability_json
+from vhcjax.stability import AGREEMENT_RTOL, gait_multipliers_jit
 
 FLAGS = {
     "phase_not_monotone",

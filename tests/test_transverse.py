@@ -228,3 +228,17 @@ def test_large_batches_run_in_chunks_with_the_same_results(gaits, mults, monkeyp
     np.testing.assert_allclose(
         np.asarray(chunked.poincare), np.asarray(mults.poincare), rtol=1e-12, atol=1e-14
     )
+
+
+def test_poincare_only_gives_the_same_verdict(gaits, mults):
+    """`transverse=False` computes the Poincare multipliers and the verdict only (the
+    transverse fields are `None`, the code says they were not asked for)."""
+    psis, zs, _ = gaits
+    quick = S.family_multipliers(
+        CompassGait(), jnp.asarray(psis), jnp.asarray(zs), transverse=False
+    )
+    assert quick.transverse is None and quick.linearization is None
+    assert vhcjax.result_names(quick.transverse_result) == ["not_requested"] * 6
+    assert vhcjax.result_names(quick.result) == ["successful"] * 6
+    np.testing.assert_array_equal(np.asarray(quick.poincare), np.asarray(mults.poincare))
+    np.testing.assert_array_equal(np.asarray(quick.stable), np.asarray(mults.stable))

@@ -47,6 +47,9 @@ class RESULTS(eqx.Enumeration):
         "1e-6 (relative to the spectral radius), or the transverse construction does not "
         "reproduce the orbit; the Poincare-map Jacobian decides."
     )
+    not_requested = (
+        "The transverse linearization was not asked for; the Poincare-map Jacobian decides."
+    )
 
 
 def result_names(result) -> list[str] | str:

@@ -90,6 +90,7 @@ def run_multipliers(args):
 
     from .. import stability as S
     from .._results import result_names
+    from ._multiplier_fields import stability_json
 
     model = model_from_args(args)
     check_output_file(args.png, "--png")
@@ -106,7 +107,7 @@ def run_multipliers(args):
     z = model.state_to_section(gait.x_plus)
     gm = S.gait_multipliers_jit(model, z)
     tr, pc = np.asarray(gm.transverse), np.asarray(gm.poincare)
-    stab = S.stability_json(gm)
+    stab = stability_json(gm)
     trusted = stab["multipliers"] is not None
     if not trusted:
         warn(args, stab["multipliers_reason"])
@@ -162,7 +163,7 @@ def run_bifurcation(args):
             "default model's 3-degree gait); check the model flags"
         )
     bar.update(1)
-    mult = S.family_multipliers(model, fam.psi, fam.z)
+    mult = S.family_multipliers(model, fam.psi, fam.z, transverse=False)
     stable1 = np.asarray(mult.stable) & ok1
     bar.update(1)
     flips = []

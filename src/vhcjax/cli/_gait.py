@@ -20,8 +20,10 @@ from ._common import (
     progress,
     warn,
 )
+from ._multiplier_fields import CSV_COLUMNS as STABILITY_COLUMNS
 
-#: CSV columns of `vhcjax sweep` (`sweep_row` writes them; append new ones at the end).
+#: CSV columns of `vhcjax sweep` (`sweep_row` and `add_stability_columns` write them;
+#: new ones go at the end).
 CSV_COLUMNS = [
     "slope_deg",
     "result",
@@ -37,18 +39,7 @@ CSV_COLUMNS = [
     "E0",
     "step_length",
     "speed",
-    # stability: transverse-linearization multipliers, by modulus
-    "mult1_re",
-    "mult1_im",
-    "mult2_re",
-    "mult2_im",
-    "mult3_re",
-    "mult3_im",
-    "max_abs_multiplier",
-    "stable",
-    # mult1..3 are empty where the transverse linearization is not trusted;
-    # max_abs_multiplier and stable come from the Poincare-map Jacobian
-    "transverse_result",
+    *STABILITY_COLUMNS,
 ]
 PARAM_KEYS = ("a", "b", "c", "d", "e", "f", "g", "h", "T", "E0")
 
@@ -86,6 +77,7 @@ def register(subparsers):
         action="store_true",
         help="skip the multipliers and the stability verdict (faster)",
     )
+    _transverse_flag(p)
     p.set_defaults(func=run_gait)
 
     s = subparsers.add_parser(
@@ -107,7 +99,18 @@ def register(subparsers):
     )
     s.add_argument("--png", metavar="FILE", help="plot a, b, T and speed against slope")
     s.add_argument("--json", action="store_true", help="print the sweep as JSON")
+    _transverse_flag(s)
     s.set_defaults(func=run_sweep)
+
+
+def _transverse_flag(p):
+    p.add_argument(
+        "--transverse",
+        action="store_true",
+        help="also compute the multipliers by the transverse linearization (thesis ch. 6) "
+        "and check them against the Poincare-map Jacobian, which gives the verdict "
+        "(several times slower)",
+    )
 
 
 def _family_method(p, both):
@@ -176,11 +179,15 @@ def run_gait(args):
         rec["residual"] = None  # no converged gait: the library's value is a placeholder
     stab = None
     if found and not args.no_stability:  # multipliers, two ways
-        from ..stability import gait_multipliers_jit, stability_json
+        from ..stability import gait_multipliers
+        from ._multiplier_fields import stability_json
 
-        stab = stability_json(gait_multipliers_jit(model, model.state_to_section(gait.x_plus)))
+        z = model.state_to_section(gait.x_plus)
+        stab = stability_json(gait_multipliers(model, z, transverse=args.transverse))
+        if not args.transverse:
+            stab["multipliers_reason"] = "transverse linearization not requested (--transverse)"
         rec.update(stab)
-        if stab.get("multipliers_reason"):
+        if args.transverse and stab.get("multipliers_reason"):
             warn(args, stab["multipliers_reason"])
     if args.json:
         print_json(rec)
@@ -287,10 +294,11 @@ def run_sweep(args):
         for fam, sw in results.items()
     }
     if args.csv:  # multipliers of every gait in one batched call
-        from ..stability import add_stability_columns
+        from ._multiplier_fields import add_stability_columns
 
         for fam, sw in results.items():
-            add_stability_columns(model, sw.gaits, [math.radians(v) for v in slopes], rows[fam])
+            psis = [math.radians(v) for v in slopes]
+            add_stability_columns(model, sw.gaits, psis, rows[fam], args.transverse)
     if args.csv:
         from .._io import atomic_open
 

@@ -4,7 +4,6 @@ Jacobian, period doubling, period-k orbits, bifurcation diagrams.
 
 from ._multipliers import (
     AGREEMENT_RTOL as AGREEMENT_RTOL,
-    CSV_COLUMNS as CSV_COLUMNS,
     MAX_CONDITION as MAX_CONDITION,
     SEEDS_3DEG as SEEDS_3DEG,
     BifurcationDiagram as BifurcationDiagram,
@@ -12,7 +11,6 @@ from ._multipliers import (
     GaitMultipliers as GaitMultipliers,
     PeriodDoubling as PeriodDoubling,
     PeriodKOrbit as PeriodKOrbit,
-    add_stability_columns as add_stability_columns,
     bifurcation_diagram as bifurcation_diagram,
     detect_period as detect_period,
     family_multipliers as family_multipliers,
@@ -28,8 +26,6 @@ from ._multipliers import (
     period_doubling_slopes_from_diagram as period_doubling_slopes_from_diagram,
     period_k_orbit as period_k_orbit,
     settle as settle,
-    stability_csv_row as stability_csv_row,
-    stability_json as stability_json,
     to_midswing as to_midswing,
     transverse_note as transverse_note,
     with_slope as with_slope,

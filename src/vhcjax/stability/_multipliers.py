@@ -16,7 +16,6 @@
 """
 
 import math
-from typing import Any
 
 import diffrax
 import equinox as eqx
@@ -93,9 +92,13 @@ class GaitMultipliers(eqx.Module):
       over the Poincare spectral radius).
     - `condition`: the larger condition number of $[L; m^T]$ at the two ends.
     - `linearization`: the full `TransverseLinearization` (Xi, Phi(T), dF, ...).
+
+    Computed with `transverse=False`, only the Poincare multipliers are there:
+    `transverse`, `disagreement`, `condition` and `linearization` are `None` and
+    `transverse_result` is `not_requested`.
     """
 
-    transverse: jax.Array
+    transverse: jax.Array | None
     poincare: jax.Array
     max_abs: jax.Array
     stable: jax.Array
@@ -103,9 +106,9 @@ class GaitMultipliers(eqx.Module):
     x_minus: jax.Array
     result: RESULTS
     transverse_result: RESULTS
-    disagreement: jax.Array
-    condition: jax.Array
-    linearization: TransverseLinearization
+    disagreement: jax.Array | None
+    condition: jax.Array | None
+    linearization: TransverseLinearization | None
 
 
 #: Relative difference above which the two multiplier computations disagree.
@@ -173,22 +176,29 @@ def _transverse_checks(model, x0, sr, tl, pm, config):
     return code, disagreement, condition
 
 
-def _gait_multipliers(model, z, config=DEFAULT_CONFIG):
+def _gait_multipliers(model, z, config=DEFAULT_CONFIG, transverse=True):
     """Both multiplier computations at the period-1 gait with section coordinates `z`,
-    with the checks of the transverse one."""
+    with the checks of the transverse one (`transverse=False`: the Poincare ones only)."""
     z = jnp.asarray(z, float)
     x0 = model.section_to_state(z)
     sr = step_unchecked(model, x0, config)
-    tl = transverse_linearization(model, x0, sr.x_minus, sr.period)
     pm = _sort(jnp.linalg.eigvals(jacobian(model, z, 1, config)))
     code = RESULTS.where(
         sr.result == RESULTS.successful,
         RESULTS.where(jnp.all(jnp.isfinite(pm)), RESULTS.successful, RESULTS.nonfinite),
         sr.result,
     )
-    tcode, disagreement, condition = _transverse_checks(model, x0, sr, tl, pm, config)
-    tcode = RESULTS.where(code == RESULTS.successful, tcode, code)
     ok = code == RESULTS.successful
+    if not transverse:
+        pm = jnp.where(ok, pm, 0.0)
+        mx = jnp.max(jnp.abs(pm))
+        tcode = RESULTS.where(ok, RESULTS.not_requested, code)
+        return GaitMultipliers(
+            None, pm, mx, ok & (mx < 1.0), sr.period, sr.x_minus, code, tcode, None, None, None
+        )
+    tl = transverse_linearization(model, x0, sr.x_minus, sr.period)
+    tcode, disagreement, condition = _transverse_checks(model, x0, sr, tl, pm, config)
+    tcode = RESULTS.where(ok, tcode, code)
     pm = jnp.where(ok, pm, 0.0)
     mx = jnp.max(jnp.abs(pm))
     # No NaN or inf in a result: where the construction broke down its matrices are
@@ -204,8 +214,10 @@ def _gait_multipliers(model, z, config=DEFAULT_CONFIG):
 
 
 @stored_jit
-def _family_multipliers_padded(model, psis, zs, config):
-    return jax.vmap(lambda p, z: _gait_multipliers(with_slope(model, p), z, config))(psis, zs)
+def _family_multipliers_padded(model, psis, zs, config, transverse):
+    return jax.vmap(lambda p, z: _gait_multipliers(with_slope(model, p), z, config, transverse))(
+        psis, zs
+    )
 
 
 _MAX_CHUNK = MAX_DISPATCH
@@ -216,7 +228,7 @@ def _bucket(n):
     return bucket_size(n) if n <= _MAX_CHUNK else _MAX_CHUNK * -(-n // _MAX_CHUNK)
 
 
-def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, mesh=None):
+def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, transverse=True, mesh=None):
     """`gait_multipliers` for many slopes in one batched (`vmap`) call.
 
     `psis` (B,) in rad, `zs` (B, 2n-1) the gaits there. Returns a batched
@@ -236,29 +248,36 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, mesh=None):
     zs = jnp.concatenate([zs, jnp.broadcast_to(zs[:1], (pad, zs.shape[1]))])
     if n > _MAX_CHUNK:  # see `_sharding.MAX_DISPATCH`; every chunk is one full bucket
         out = in_chunks(
-            lambda i, j: family_multipliers(model, psis[i:j], zs[i:j], config, mesh=mesh),
+            lambda i, j: family_multipliers(
+                model, psis[i:j], zs[i:j], config, transverse=transverse, mesh=mesh
+            ),
             n + pad,
             _MAX_CHUNK,
             host_workers(mesh),
         )
         return jax.tree_util.tree_map(lambda x: x[:n], out)
     psis, zs = shard_batch((psis, zs), mesh)
-    out = _family_multipliers_padded(model, psis, zs, config)
+    out = _family_multipliers_padded(model, psis, zs, config, transverse)
     return jax.tree_util.tree_map(lambda x: x[:n], out)
 
 
-def gait_multipliers(model, z, config=DEFAULT_CONFIG):
+def gait_multipliers(model, z, config=DEFAULT_CONFIG, *, transverse=True):
     """Both multiplier computations at the period-1 gait with section coordinates `z`:
     `transverse` (eigenvalues of Xi, thesis 6.42) and `poincare` (eigenvalues of the
-    autodiff Jacobian of the step map), sorted by modulus.
+    autodiff Jacobian of the step map), sorted by modulus. `transverse=False` computes
+    the Poincare multipliers (and the verdict) only, several times faster.
 
     Runs as a batch of one of `family_multipliers` (same compiled program) when the
     model has a slope `psi`; otherwise compiles on its own.
     """
     if not hasattr(model, "psi"):
-        return _gait_multipliers_jit(model, z, config)
+        return _gait_multipliers_jit(model, z, config, transverse)
     out = family_multipliers(
-        model, jnp.asarray(model.psi)[None], jnp.asarray(z, float)[None], config
+        model,
+        jnp.asarray(model.psi)[None],
+        jnp.asarray(z, float)[None],
+        config,
+        transverse=transverse,
     )
     return jax.tree_util.tree_map(lambda x: x[0], out)
 
@@ -737,20 +756,7 @@ def period2_branch(model, pd, psis, config=DEFAULT_CONFIG, amplitudes=(3e-3, 1e-
     }
 
 
-# ---- output helpers for the `gait` command (JSON fields and sweep CSV columns) -----------
-CSV_COLUMNS = [
-    "mult1_re",
-    "mult1_im",
-    "mult2_re",
-    "mult2_im",
-    "mult3_re",
-    "mult3_im",
-    "max_abs_multiplier",
-    "stable",
-    "transverse_result",
-]
-
-
+# ---- why the transverse multipliers are not used -------------------------------------
 def _pick(x, index):
     x = np.asarray(x)
     return x if index is None else x[index]
@@ -766,67 +772,8 @@ def transverse_note(gm, index=None):
         return None
     assert isinstance(name, str)  # one result: a single `GaitMultipliers` or `index` given
     msg = f"transverse linearization not used ({name}): {RESULTS[getattr(RESULTS, name)]}"
-    dis = float(_pick(gm.disagreement, index))
-    if name == "methods_disagree" and math.isfinite(dis):
-        msg += f" Relative difference {dis:.3g}."
+    if name == "methods_disagree":
+        dis = float(_pick(gm.disagreement, index))
+        if math.isfinite(dis):
+            msg += f" Relative difference {dis:.3g}."
     return msg
-
-
-def stability_json(gm, index=None):
-    """JSON fields from a (possibly batched, then `index`) `GaitMultipliers`:
-    `multipliers` (transverse linearization, a list of `[re, im]`, or `null` where its
-    assumptions fail, with `multipliers_reason`), `multipliers_poincare`,
-    `max_abs_multiplier` and `stable` (from the Poincare multipliers, see
-    `GaitMultipliers`), `stability_method`, `transverse_result` and
-    `transverse_disagreement` (relative, `null` if not finite)."""
-    from .._results import result_names
-
-    tr, pc = _pick(gm.transverse, index), _pick(gm.poincare, index)
-    note = transverse_note(gm, index)
-    dis = float(_pick(gm.disagreement, index))
-    out: dict[str, Any] = {
-        "multipliers": None if note else [[float(e.real), float(e.imag)] for e in tr]
-    }
-    if note:
-        out["multipliers_reason"] = note
-    out.update(
-        {
-            "multipliers_poincare": [[float(e.real), float(e.imag)] for e in pc],
-            "max_abs_multiplier": float(_pick(gm.max_abs, index)),
-            "stable": bool(_pick(gm.stable, index)),
-            "stability_method": "poincare_jacobian",
-            "transverse_result": result_names(_pick(gm.transverse_result._value, index)),
-            "transverse_disagreement": dis if math.isfinite(dis) else None,
-        }
-    )
-    return out
-
-
-def stability_csv_row(gm, index=None):
-    """Values for `CSV_COLUMNS`: the transverse multipliers by modulus (empty where
-    `transverse_result` is not `successful`), the largest Poincare modulus, the verdict
-    from it, and `transverse_result`."""
-    from .._results import result_names
-
-    tr = _pick(gm.transverse, index)
-    trusted = transverse_note(gm, index) is None
-    row = []
-    for e in tr:
-        row += [float(e.real), float(e.imag)] if trusted else ["", ""]
-    return row + [
-        float(_pick(gm.max_abs, index)),
-        bool(_pick(gm.stable, index)),
-        result_names(_pick(gm.transverse_result._value, index)),
-    ]
-
-
-def add_stability_columns(model, gaits, psis, rows):
-    """Add the `CSV_COLUMNS` values to sweep rows (dicts) of a batched `Gait`, from one
-    batched `family_multipliers` call; rows whose gait failed get empty values."""
-    z = jax.vmap(model.state_to_section)(jnp.asarray(gaits.x_plus))
-    gm = family_multipliers(model, jnp.asarray(psis, float), z)
-    ok = np.asarray(gm.result._value) == 0
-    for i, row in enumerate(rows):
-        good = ok[i] and row.get("result") == "successful"
-        vals = stability_csv_row(gm, i) if good else [""] * len(CSV_COLUMNS)
-        row.update(dict(zip(CSV_COLUMNS, vals)))
