@@ -9,7 +9,8 @@ the same jobs in the same run.
 - `vhcjax sweep --slope-deg 0.5:4.3:STEP --family stable --csv FILE` at N1 and N2 slopes
   (second runs): the cost per gait from the difference (compile and start cancel) and the
   fixed overhead; with an empty cache too. scipy: a warm-started `fsolve` continuation
-  over a subset of the same slopes, its cost per gait.
+  over a subset of the same slopes with the multipliers of each gait (central-difference
+  Jacobian of the step map, as the CSV's stability columns), its cost per gait.
 - A fresh Python process: `find_gait` and `gait_multipliers` at 3 degrees (warm cache).
 - The other commands at the sizes users run, second runs.
 
@@ -55,12 +56,28 @@ import scipy_gait, scipy_reference as ref
 deg = np.linspace(0.5, 4.3, {n})
 x = np.array([0.2, -1.0])
 x, _ = scipy_gait.vhc_search(ref.Params(psi=math.radians(3.0)), x)
+
+
+def multipliers(par, a, b):  # the CSV's stability columns: central-difference Jacobian
+    d, f, h = scipy_gait._abcd(par, scipy_gait._p(par), a, b, -1.0)
+    z = np.array([a, b, f])
+
+    def P(z):
+        out = ref.step(par, np.array([z[0], -z[0] - 2 * par.psi, z[1], z[2]]))
+        return np.array([out.x_plus[0], out.x_plus[2], out.x_plus[3]])
+
+    J = np.stack([(P(z + 1e-6 * e) - P(z - 1e-6 * e)) / 2e-6 for e in np.eye(3)], axis=1)
+    return np.linalg.eigvals(J)
+
+
 t0 = time.perf_counter()
 found = 0
 for d in deg[::-1]:  # warm-started continuation from the top of the range down
-    sol, ok = scipy_gait.vhc_search(ref.Params(psi=math.radians(d)), x)
+    par = ref.Params(psi=math.radians(d))
+    sol, ok = scipy_gait.vhc_search(par, x)
     if ok:
         x, found = sol, found + 1
+        multipliers(par, *sol)
 print((time.perf_counter() - t0, found))
 """
 

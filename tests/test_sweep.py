@@ -56,7 +56,10 @@ def test_real_ends_are_reported_with_their_cause():
     assert "no real root" in ends[0]["reason"]
     # A light hip (1 kg on 5 kg legs): the phi'' ODE of the stable family becomes
     # singular between 4 and 4.5 degrees.
-    sw = vj.sweep(vj.CompassGait(mH=1.0), np.radians([3.5, 4.0, 4.5, 5.0]), "stable")
+    sw = vj.sweep(
+        vj.CompassGait(mH=1.0), np.radians([3.5, 4.0, 4.5, 5.0]), "stable", tangents=False
+    )
+    assert sw.tangent is None  # not asked for; the end's test computes its own
     assert vj.result_names(sw.gaits.result) == ["successful"] * 2 + ["singular_phi_ode"] * 2
     ends = sw.ends()
     assert [(round(e["last_slope_deg"], 9), e["result"]) for e in ends] == [
@@ -87,7 +90,13 @@ def test_a_missed_slope_is_retried_from_its_neighbour():
     )
     missed = eqx.tree_at(lambda g: g.result, good, code)
     sign = vj.gait.family_sign("stable")
-    fixed, tangent = _sweep._retry(model, psi, missed, "stable", "vhc", sign, math.radians(0.1))
+    fixed, tangent, _ = _sweep._retry(model, psi, missed, "stable", "vhc", sign, math.radians(0.1))
     assert vj.result_names(fixed.result) == ["successful"] * 3
     np.testing.assert_allclose(np.asarray(fixed.x_plus), np.asarray(good.x_plus), atol=1e-10)
     assert np.all(np.asarray(tangent) != 0)
+    # without all the tangents: the same gaits, a tangent only where a retry started
+    again, tangent, have = _sweep._retry(
+        model, psi, missed, "stable", "vhc", sign, math.radians(0.1), all_tangents=False
+    )
+    np.testing.assert_array_equal(np.asarray(again.x_plus), np.asarray(fixed.x_plus))
+    assert have.sum() == 1 and not have[1]  # the nearest found neighbour only

@@ -22,7 +22,7 @@ from ._common import (
 )
 from ._multiplier_fields import CSV_COLUMNS as STABILITY_COLUMNS
 
-#: CSV columns of `vhcjax sweep` (`sweep_row` and `add_stability_columns` write them;
+#: CSV columns of `vhcjax sweep` (`sweep_rows` and `add_stability_columns` write them;
 #: new ones go at the end).
 CSV_COLUMNS = [
     "slope_deg",
@@ -42,6 +42,7 @@ CSV_COLUMNS = [
     *STABILITY_COLUMNS,
 ]
 PARAM_KEYS = ("a", "b", "c", "d", "e", "f", "g", "h", "T", "E0")
+NUMBER_KEYS = PARAM_KEYS + ("step_length", "speed")
 
 
 def register(subparsers):
@@ -261,15 +262,24 @@ def _run_kneed_gait(args):
     return 0 if result == "successful" else 1
 
 
-def sweep_row(gait, i, slope_deg):
-    """One CSV row (a dict over `CSV_COLUMNS`) for member `i` of a batched gait."""
+def sweep_rows(gaits, slopes_deg):
+    """CSV rows (dicts over `CSV_COLUMNS`, stability columns aside) of a batched gait, one
+    per slope; a failed member has no numbers (empty in the CSV)."""
+    import jax
+    import numpy as np
+
     from .._results import result_names
 
-    row = {"slope_deg": slope_deg, "result": result_names(gait.result._value[i])}
-    ok = row["result"] == "successful"
-    for k in PARAM_KEYS + ("step_length", "speed"):  # no gait, no numbers (CSV: empty)
-        row[k] = float(getattr(gait, k)[i]) if ok else None
-    return row
+    g = jax.device_get(gaits)  # one transfer, then plain numpy per row
+    names = result_names(np.atleast_1d(g.result._value))
+    cols = {k: np.atleast_1d(np.asarray(getattr(g, k), float)) for k in NUMBER_KEYS}
+    rows = []
+    for i, (name, slope) in enumerate(zip(names, slopes_deg)):
+        row = {"slope_deg": slope, "result": name}
+        ok = name == "successful"
+        row.update({k: float(v[i]) if ok else None for k, v in cols.items()})
+        rows.append(row)
+    return rows
 
 
 def run_sweep(args):
@@ -286,13 +296,12 @@ def run_sweep(args):
     bar = progress(total=len(families), desc="sweep")
     for fam in families:
         bar.set_description(f"sweep {fam}")
-        results[fam] = sweep(model, [math.radians(v) for v in slopes], fam, args.method)
+        results[fam] = sweep(
+            model, [math.radians(v) for v in slopes], fam, args.method, tangents=False
+        )
         bar.update(1)
     bar.close()
-    rows = {
-        fam: [sweep_row(sw.gaits, i, v) for i, v in enumerate(slopes)]
-        for fam, sw in results.items()
-    }
+    rows = {fam: sweep_rows(sw.gaits, slopes) for fam, sw in results.items()}
     if args.csv:  # multipliers of every gait in one batched call
         from ._multiplier_fields import add_stability_columns
 

@@ -39,7 +39,6 @@ from ..hybrid import (
     DEFAULT_CONFIG,
     FAST_CONFIG,
     fixed_point,
-    jacobian,
     ode_solver,
     simulate,
     solve_to_event,
@@ -181,8 +180,14 @@ def _gait_multipliers(model, z, config=DEFAULT_CONFIG, transverse=True):
     with the checks of the transverse one (`transverse=False`: the Poincare ones only)."""
     z = jnp.asarray(z, float)
     x0 = model.section_to_state(z)
-    sr = step_unchecked(model, x0, config)
-    pm = _sort(jnp.linalg.eigvals(jacobian(model, z, 1, config)))
+
+    def step(zz):  # the step map and, as a by-product, the step itself
+        sr = step_unchecked(model, model.section_to_state(zz), config)
+        return model.state_to_section(sr.x_plus), sr
+
+    # the Jacobian of the step map (as `hybrid.jacobian`) with the step in the same pass
+    J, sr = jax.jacfwd(step, has_aux=True)(z)
+    pm = _sort(jnp.linalg.eigvals(J))
     code = RESULTS.where(
         sr.result == RESULTS.successful,
         RESULTS.where(jnp.all(jnp.isfinite(pm)), RESULTS.successful, RESULTS.nonfinite),
