@@ -30,7 +30,6 @@ import threading
 import equinox as eqx
 import jax
 import jax.core
-import jax.numpy as jnp
 import numpy as np
 
 _SUFFIX = ".program"
@@ -162,9 +161,14 @@ class _Program:
             (next(iter(x.sharding.device_set)) for x in leaves if getattr(x, "committed", False)),
             jax.devices()[0],
         )
-        leaves = [jax.device_put(jnp.asarray(x, dtype=x.dtype), device) for x in leaves]
+        leaves = [jax.device_put(_plain(x), device) for x in leaves]
         out = self._call(*leaves)
         return eqx.combine(jax.tree_util.tree_unflatten(self._out_tree, out), self._out_static)
+
+
+def _plain(x):
+    """`x` without a weak type (on the host if it had one: no operation to dispatch)."""
+    return np.asarray(x) if getattr(x, "weak_type", False) or not isinstance(x, jax.Array) else x
 
 
 #: LAPACK kernels that `jax.export` does not promise to keep across JAX versions. A

@@ -104,14 +104,15 @@ _CHUNK = 16
 def _run_continuation(start, end, s_values, z0, sign, method):
     """Host wrapper: run `_continue` over `s_values` in calls of `_CHUNK` points. Each call
     after the first starts again from the last point solved (re-solved as its first entry,
-    dropped), so the result is that of one long loop.
+    dropped), so the result is that of one long loop. **Returns:** the gaits and tangents
+    as numpy arrays (host side).
     """
     import numpy as np
 
     s_values = np.asarray(s_values, dtype=float)
     n = len(s_values)
     parts, tangent_parts = [], []
-    s_start, z_start, done = s_values[0], jnp.asarray(z0), 0
+    s_start, z_start, done = s_values[0], z0, 0
     while done < n:
         first = done == 0
         new = s_values[done : done + (_CHUNK if first else _CHUNK - 1)]
@@ -119,20 +120,23 @@ def _run_continuation(start, end, s_values, z0, sign, method):
         k = len(s_run)
         s_buf = np.concatenate([s_run, np.full(_CHUNK - k, s_run[-1])])
         # `k` traced: a short last call shares the program.
-        gaits, tangents = _continue_jit(
-            start, end, jnp.asarray(s_buf), jnp.asarray(k), z_start, sign, method
-        )
+        out = _continue_jit(start, end, s_buf, np.asarray(k), z_start, sign, method)
         skip = 0 if first else 1
-        gaits = jax.tree_util.tree_map(lambda x: x[skip:k], gaits)
+        gaits, tangents = jax.tree_util.tree_map(lambda x: x[skip:k], jax.device_get(out))
         parts.append(gaits)
-        tangent_parts.append(tangents[skip:k])
+        tangent_parts.append(tangents)
         ok = np.flatnonzero(np.asarray(gaits.result._value) == RESULTS.successful._value)
         if ok.size:
-            last = jax.tree_util.tree_map(lambda x: x[ok[-1]], gaits)
-            s_start, z_start = new[ok[-1]], _unknowns(last, method)
+            i = ok[-1]
+            last = (
+                (gaits.a[i], gaits.b[i])
+                if method == "vhc"
+                else (gaits.a[i], gaits.b[i], gaits.f[i])
+            )
+            s_start, z_start = new[i], np.asarray(last)
         done += len(new)
-    gaits = jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
-    return gaits, jnp.concatenate(tangent_parts)
+    gaits = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *parts)
+    return gaits, np.concatenate(tangent_parts)
 
 
 _HOMOTOPY_STEPS = 16

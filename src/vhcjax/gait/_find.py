@@ -221,6 +221,7 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord):
     return _clean_failed(_relabel(gaits, family), guesses, B)
 
 
+@eqx.filter_jit  # one small program, not a dozen operations dispatched one by one
 def _clean_failed(gaits, guesses, B=None):
     """Members with a non-finite guess are `bad_input`; failed members hold no NaN or inf:
     their numbers are placeholders (0 where not finite), the code says why. `B`: batch

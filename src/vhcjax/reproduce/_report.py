@@ -907,7 +907,8 @@ def reproduce(out_dir, quick=False, progress=None):
                 jax.tree_util.tree_map(
                     lambda x: jnp.asarray(x) if isinstance(x, np.ndarray) else x, g
                 ),
-                jnp.zeros((n, 3)),
+                None,  # no tangents: the sweep is drawn, not tested for folds
+                jnp.zeros(n),
             )
             z = np.asarray(g.z)
             mm = _multipliers(slopes, z)

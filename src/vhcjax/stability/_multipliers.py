@@ -20,6 +20,7 @@ import math
 import diffrax
 import equinox as eqx
 import jax
+import jax.core
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
@@ -243,14 +244,15 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, transverse=Tru
     batches above 256 run as chunks of 256, one per CPU core at a time
     (`_sharding.host_workers`).
     Batches above one member are split over the devices of `mesh` (default: all local
-    devices).
+    devices). A host-side function (concrete inputs; the result's leaves are numpy
+    arrays); under `jit` or a derivative, `vmap` `gait_multipliers` instead.
     """
-    psis = jnp.atleast_1d(jnp.asarray(psis, float))
-    zs = jnp.asarray(zs, float).reshape(psis.shape[0], -1)
+    psis = np.atleast_1d(np.asarray(psis, float))
+    zs = np.asarray(zs, float).reshape(psis.shape[0], -1)
     n = psis.shape[0]
     pad = (_bucket(n) if n == 1 else round_to_devices(_bucket(n), mesh)) - n
-    psis = jnp.concatenate([psis, jnp.broadcast_to(psis[:1], (pad,))])
-    zs = jnp.concatenate([zs, jnp.broadcast_to(zs[:1], (pad, zs.shape[1]))])
+    psis = np.concatenate([psis, np.repeat(psis[:1], pad)])
+    zs = np.concatenate([zs, np.repeat(zs[:1], pad, axis=0)])
     if n > _MAX_CHUNK:  # see `_sharding.MAX_DISPATCH`; every chunk is one full bucket
         out = in_chunks(
             lambda i, j: family_multipliers(
@@ -260,10 +262,10 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, transverse=Tru
             _MAX_CHUNK,
             host_workers(mesh),
         )
-        return jax.tree_util.tree_map(lambda x: x[:n], out)
-    psis, zs = shard_batch((psis, zs), mesh)
-    out = _family_multipliers_padded(model, psis, zs, config, transverse)
-    return jax.tree_util.tree_map(lambda x: x[:n], out)
+    else:
+        psis, zs = shard_batch((psis, zs), mesh)
+        out = _family_multipliers_padded(model, psis, zs, config, transverse)
+    return jax.tree_util.tree_map(lambda x: np.asarray(x)[:n], jax.device_get(out))
 
 
 def gait_multipliers(model, z, config=DEFAULT_CONFIG, *, transverse=True):
@@ -273,14 +275,15 @@ def gait_multipliers(model, z, config=DEFAULT_CONFIG, *, transverse=True):
     the Poincare multipliers (and the verdict) only, several times faster.
 
     Runs as a batch of one of `family_multipliers` (same compiled program) when the
-    model has a slope `psi`; otherwise compiles on its own.
+    model has a slope `psi`; otherwise, or under a JAX transformation, on its own.
     """
-    if not hasattr(model, "psi"):
+    traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((model, z)))
+    if traced or not hasattr(model, "psi"):
         return _gait_multipliers_jit(model, z, config, transverse)
     out = family_multipliers(
         model,
-        jnp.asarray(model.psi)[None],
-        jnp.asarray(z, float)[None],
+        np.asarray(model.psi)[None],
+        np.asarray(z, float)[None],
         config,
         transverse=transverse,
     )
