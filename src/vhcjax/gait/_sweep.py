@@ -33,13 +33,14 @@ class Sweep(eqx.Module):
     - `tangent`: $dz^*/d\\psi$ at each slope where the gait was found (zero elsewhere), or
       `None` when the sweep was asked not to compute it (`tangents=False`).
     - `edge_tangent`: $\\max_k |dz^*_k/d\\psi|$ at each found slope next to a missed one
-      (zero elsewhere): a large value there means a fold.
+      (zero elsewhere): a large value there means a fold; `None` (a `Sweep` built by
+      hand, e.g. to plot gaits): no fold is reported.
     """
 
     psi: jax.Array
     gaits: Gait
-    tangent: jax.Array | None
-    edge_tangent: jax.Array
+    tangent: jax.Array | None = None
+    edge_tangent: jax.Array | None = None
 
     @property
     def ok(self):
@@ -57,7 +58,7 @@ class Sweep(eqx.Module):
         names = result_names(self.gaits.result)
         names = [names] if isinstance(names, str) else names
         deg = np.degrees(np.asarray(self.psi))
-        tan = np.asarray(self.edge_tangent)
+        tan = np.zeros(len(ok)) if self.edge_tangent is None else np.asarray(self.edge_tangent)
         out = []
         for i in range(len(ok)):
             if ok[i]:

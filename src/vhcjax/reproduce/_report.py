@@ -907,9 +907,7 @@ def reproduce(out_dir, quick=False, progress=None):
                 jax.tree_util.tree_map(
                     lambda x: jnp.asarray(x) if isinstance(x, np.ndarray) else x, g
                 ),
-                None,  # no tangents: the sweep is drawn, not tested for folds
-                jnp.zeros(n),
-            )
+            )  # no tangents: the sweep is drawn, not tested for folds
             z = np.asarray(g.z)
             mm = _multipliers(slopes, z)
             mults[fam] = (ok, mm)
