@@ -11,6 +11,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 from . import trig as trig  # vectorizable sin/cos for model kinematics
+from ._batching import report_progress as report_progress
 from ._cache import (
     clear_caches as clear_caches,
     default_cache_dir as default_cache_dir,

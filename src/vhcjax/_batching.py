@@ -11,6 +11,8 @@ Several hosts: call `jax.distributed.initialize()` first on each host; `default_
 spans `jax.devices()` (all devices of all hosts) and the same code runs unchanged.
 """
 
+import contextlib
+import contextvars
 import os
 from concurrent.futures import ThreadPoolExecutor
 
@@ -130,6 +132,31 @@ def host_workers(mesh=None):
     return max(1, (cores or 1) // devices.size)
 
 
+_PROGRESS = contextvars.ContextVar("vhcjax_progress", default=None)
+
+
+@contextlib.contextmanager
+def report_progress(callback):
+    """Within this block, `callback(stage, done, total)` is called on the calling thread
+    each time a chunk of a batched computation (gait search, tangents, multipliers,
+    simulation, continuation) has finished: `done` of `total` chunks of `stage`.
+    For progress bars; nothing is reported for a batch that runs in one chunk.
+    """
+    token = _PROGRESS.set(callback)
+    try:
+        yield
+    finally:
+        _PROGRESS.reset(token)
+
+
+def report(stage, done, total):
+    """Tell the `report_progress` callback (if any) that `done` of `total` chunks of
+    `stage` have finished."""
+    callback = _PROGRESS.get()
+    if callback is not None:
+        callback(stage, done, total)
+
+
 def map_in_order(fn, items, workers=1, progress=None):
     """`[fn(x) for x in items]`, up to `workers` calls at once from a pool of host threads
     (see `host_workers`), results in the order of `items`; `progress` optionally wraps
@@ -144,15 +171,27 @@ def map_in_order(fn, items, workers=1, progress=None):
         return [r for _, r in zip(ticks, results)]
 
 
-def in_chunks(fn, n, chunk, workers=1):
+def in_chunks(fn, n, chunk, workers=1, stage="batch"):
     """`fn(i, j)` on the slices `[i, j)` of a batch of `n`, `chunk` at a time, results
     concatenated along the batch axis (a host loop: each call is one dispatch).
 
     With `workers > 1`, up to `workers` chunks run at once (`map_in_order`), for a CPU
     where each program runs on one core (see `host_workers`). The chunks are independent,
     so the results are the same as one at a time; JAX traces and compiles a program once
-    even when several threads call it first.
+    even when several threads call it first. Finished chunks are reported to
+    `report_progress` as `stage`.
     """
     bounds = [(i, min(i + chunk, n)) for i in range(0, n, chunk)]
-    parts = map_in_order(lambda b: fn(*b), bounds, workers)
+    if _PROGRESS.get() is None or len(bounds) == 1:
+        parts = map_in_order(lambda b: fn(*b), bounds, workers)
+    else:
+
+        def ticks(items):  # results are collected in order: report each as it arrives
+            for k, b in enumerate(items):
+                if k:
+                    report(stage, k, len(bounds))
+                yield b
+            report(stage, len(bounds), len(bounds))
+
+        parts = map_in_order(lambda b: jax.block_until_ready(fn(*b)), bounds, workers, ticks)
     return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)

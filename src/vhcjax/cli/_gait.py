@@ -292,22 +292,33 @@ def run_sweep(args):
     check_output_file(args.csv, "--csv")
     check_output_file(args.png, "--png")
     families = ("stable", "unstable") if args.family == "both" else (args.family,)
-    results = {}
-    bar = progress(total=len(families), desc="sweep")
-    for fam in families:
-        bar.set_description(f"sweep {fam}")
-        results[fam] = sweep(
-            model, [math.radians(v) for v in slopes], fam, args.method, tangents=False
-        )
-        bar.update(1)
-    bar.close()
-    rows = {fam: sweep_rows(sw.gaits, slopes) for fam, sw in results.items()}
-    if args.csv:  # multipliers of every gait in one batched call
-        from ._multiplier_fields import add_stability_columns
+    from .._batching import report_progress
 
-        for fam, sw in results.items():
-            psis = [math.radians(v) for v in slopes]
-            add_stability_columns(model, sw.gaits, psis, rows[fam], args.transverse)
+    psis = [math.radians(v) for v in slopes]
+    results, rows = {}, {}
+    bar = progress(total=1, desc="sweep")
+    stage = {"name": "", "family": ""}
+
+    def on_chunk(name, done, total):  # a bar that moves with the chunks of each stage
+        if name != stage["name"] or bar.total != total:
+            stage["name"] = name
+            bar.set_description(f"sweep {stage['family']}: {name}", refresh=False)
+            bar.reset(total=total)
+        bar.update(done - bar.n)
+
+    with report_progress(on_chunk):
+        for fam in families:
+            stage.update(name="", family=fam)
+            bar.set_description(f"sweep {fam}")
+            results[fam] = sweep(model, psis, fam, args.method, tangents=False)
+            rows[fam] = sweep_rows(results[fam].gaits, slopes)
+            if args.csv:  # multipliers of every gait in one batched call
+                from ._multiplier_fields import add_stability_columns
+
+                stage["name"] = ""  # the next chunk starts the multipliers' count
+                bar.set_description(f"sweep {fam}: multipliers")
+                add_stability_columns(model, results[fam].gaits, psis, rows[fam], args.transverse)
+    bar.close()
     if args.csv:
         from .._io import atomic_open
 

@@ -5,6 +5,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
+from .._batching import report
 from .._programs import stored_jit
 from .._results import RESULTS
 from ._dispatch import _check, _relabel, _search, reference_guess, reference_model
@@ -135,6 +136,8 @@ def _run_continuation(start, end, s_values, z0, sign, method):
             )
             s_start, z_start = new[i], np.asarray(last)
         done += len(new)
+        if n > _CHUNK:
+            report("continuation", len(parts), 1 + -(-(n - _CHUNK) // (_CHUNK - 1)))
     gaits = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *parts)
     return gaits, np.concatenate(tangent_parts)
 

@@ -217,6 +217,7 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord):
         B,
         chunk,
         workers,
+        stage="gait search",
     )
     return _clean_failed(_relabel(gaits, family), guesses, B)
 

@@ -147,7 +147,7 @@ def _tangents(model, psis, zs, sign, method):
         z = np.concatenate([zs[i:j], np.repeat(zs[i : i + 1], pad, axis=0)])
         return _tangents_padded(model, jnp.asarray(p), jnp.asarray(z), sign, method)[:m]
 
-    return np.asarray(in_chunks(part, n, chunk, host_workers()))
+    return np.asarray(in_chunks(part, n, chunk, host_workers(), stage="tangents"))
 
 
 def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_STEP, tangents=True):

@@ -433,4 +433,4 @@ def simulate_batch(model, x0, num_steps, *, config=DEFAULT_CONFIG, mesh=None):
         sim = _simulate_many(model, shard_batch(part, mesh), num_steps, config)
         return jax.tree_util.tree_map(lambda a: a[: j - i], sim)
 
-    return in_chunks(run, n, chunk, workers)
+    return in_chunks(run, n, chunk, workers, stage="simulation")

@@ -261,6 +261,7 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, transverse=Tru
             n + pad,
             _MAX_CHUNK,
             host_workers(mesh),
+            stage="multipliers",
         )
     else:
         psis, zs = shard_batch((psis, zs), mesh)
