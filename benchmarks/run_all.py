@@ -245,7 +245,8 @@ def main(argv=None):
         f"Machine: {machine['cpu']}, {machine['cores']} cores; Python {machine['python']}, "
         f"JAX {machine.get('jax', '?')}, backend {machine.get('backend', '?')} "
         f"({machine.get('num_devices', '?')} x {machine.get('device', '?')}); float64. "
-        f"`python benchmarks/run_all.py {' '.join(sys.argv[1:])}`, {total / 60:.0f} min in all."
+        f"`python benchmarks/run_all.py {' '.join(sys.argv[1:] if argv is None else argv)}`, "
+        f"{total / 60:.0f} min in all."
     )
     if args.quick:
         line += " QUICK SIZES: a check that the scripts run, not a measurement."

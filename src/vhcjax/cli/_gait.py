@@ -185,7 +185,7 @@ def run_gait(args):
 
         z = model.state_to_section(gait.x_plus)
         stab = stability_json(gait_multipliers(model, z, transverse=args.transverse))
-        if not args.transverse:
+        if stab["transverse_result"] == "not_requested":
             stab["multipliers_reason"] = "transverse linearization not requested (--transverse)"
         rec.update(stab)
         if args.transverse and stab.get("multipliers_reason"):

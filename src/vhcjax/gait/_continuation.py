@@ -105,8 +105,8 @@ _CHUNK = 16
 def _run_continuation(start, end, s_values, z0, sign, method):
     """Host wrapper: run `_continue` over `s_values` in calls of `_CHUNK` points. Each call
     after the first starts again from the last point solved (re-solved as its first entry,
-    dropped), so the result is that of one long loop. **Returns:** the gaits and tangents
-    as numpy arrays (host side).
+    dropped, with its tangent computed again), so the result is that of one long loop up
+    to rounding. **Returns:** the gaits and tangents as numpy arrays (host side).
     """
     import numpy as np
 

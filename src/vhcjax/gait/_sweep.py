@@ -58,7 +58,12 @@ class Sweep(eqx.Module):
         names = result_names(self.gaits.result)
         names = [names] if isinstance(names, str) else names
         deg = np.degrees(np.asarray(self.psi))
-        tan = np.zeros(len(ok)) if self.edge_tangent is None else np.asarray(self.edge_tangent)
+        if self.edge_tangent is not None:
+            tan = np.asarray(self.edge_tangent)
+        elif self.tangent is not None:
+            tan = np.abs(np.asarray(self.tangent)).max(axis=-1)
+        else:  # built by hand without tangents: no fold is reported
+            tan = np.zeros(len(ok))
         out = []
         for i in range(len(ok)):
             if ok[i]:
@@ -213,15 +218,16 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
         gaits = find_gaits(model, jnp.asarray(guesses), family, method, psi=jnp.asarray(ps))
         gaits, tangent, have = _retry(model, ps, gaits, family, method, sign, anchor_step, tangents)
     # 5. the tangents still wanted: all of them, or those next to a missed slope (a fold?)
+    # in the order of the slopes or in the order given (`ends()` looks there)
     ok = np.asarray(gaits.result._value) == RESULTS.successful._value
-    edge = ok & ~(np.r_[ok[1:], True] & np.r_[True, ok[:-1]])
+    inverse = np.empty_like(order)
+    inverse[order] = np.arange(len(order))
+    edge = _edges(ok) | _edges(ok[inverse])[order]
     need = (ok if tangents else edge) & ~have
     if need.any():
         z = np.asarray(jax.vmap(lambda g: _unknowns(g, method))(gaits))
         tangent[need] = _tangents(model, ps[need], z[need], sign, method)
     edge_tangent = np.where(edge, np.abs(tangent).max(axis=-1), 0.0)
-    inverse = np.empty_like(order)
-    inverse[order] = np.arange(len(order))
     gaits = jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x)[inverse]), gaits)
     gaits = _relabel(gaits, family)
     return Sweep(
@@ -230,6 +236,13 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
         jnp.asarray(tangent[inverse]) if tangents else None,
         jnp.asarray(edge_tangent[inverse]),
     )
+
+
+def _edges(ok):
+    """Found members next to a missed one (boolean mask)."""
+    import numpy as np
+
+    return ok & ~(np.r_[ok[1:], True] & np.r_[True, ok[:-1]])
 
 
 def _retry(model, ps, gaits, family, method, sign, reach, all_tangents=True):
@@ -244,7 +257,7 @@ def _retry(model, ps, gaits, family, method, sign, reach, all_tangents=True):
     ok = np.asarray(gaits.result._value) == RESULTS.successful._value
     T = np.zeros_like(Z)
     have = ok.copy() if all_tangents else np.zeros_like(ok)
-    if all_tangents:
+    if all_tangents and ok.any():
         T[ok] = _tangents(model, ps[ok], Z[ok], sign, method)
     for _ in range(_RETRIES):
         if ok.all() or not ok.any():

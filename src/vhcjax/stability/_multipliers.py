@@ -247,6 +247,11 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, transverse=Tru
     devices). A host-side function (concrete inputs; the result's leaves are numpy
     arrays); under `jit` or a derivative, `vmap` `gait_multipliers` instead.
     """
+    if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((model, psis, zs))):
+        raise TypeError(
+            "family_multipliers runs on the host (concrete inputs); under jit, vmap or a "
+            "derivative, vmap gait_multipliers instead"
+        )
     psis = np.atleast_1d(np.asarray(psis, float))
     zs = np.asarray(zs, float).reshape(psis.shape[0], -1)
     n = psis.shape[0]
