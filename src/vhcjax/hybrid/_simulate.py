@@ -90,20 +90,21 @@ def flow(
     config=DEFAULT_CONFIG,
     *,
     saveat=None,
-    event=True,
+    event: bool | diffrax.Event = True,
     adjoint=None,
     vector_field=None,
     gate=False,
     t0: float | jax.Array = 0.0,
 ):
     """Integrate the swing dynamics from `x0` over `[t0, t1]`, stopping at heel strike
-    (or, with `gate=True`, where the strike gate opens).
+    (or, with `gate=True`, where the strike gate opens; or at a `diffrax.Event` of the
+    caller's given as `event`; `event=False`: at `t1`).
 
     Low-level building block (also used for pushes and dense output). Returns the diffrax
     `Solution`.
     """
     vf = model.vector_field if vector_field is None else vector_field
-    if event and saveat is None and adjoint is None:
+    if event is True and saveat is None and adjoint is None:
         ev = _event(model, gate)
         return solve_to_event(
             vf,
@@ -127,7 +128,7 @@ def flow(
         y0=x0,
         stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
         saveat=diffrax.SaveAt(t1=True) if saveat is None else saveat,
-        event=_event(model, gate) if event else None,
+        event=_event(model, gate) if event is True else (event or None),
         max_steps=config.max_steps,
         adjoint=diffrax.ForwardMode() if adjoint is None else adjoint,
         throw=False,

@@ -40,6 +40,7 @@ from ..hybrid import (
     DEFAULT_CONFIG,
     FAST_CONFIG,
     fixed_point,
+    flow,
     ode_solver,
     simulate,
     solve_to_event,
@@ -136,19 +137,7 @@ def _phase_monotone(model, x0, period, config):
     # diffrax checks those with a host callback, which keeps a program out of JAX's
     # persistent compilation cache.
     event = diffrax.Event(lambda t, y, args, **kwargs: s * y[n] <= margin)
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(model.vector_field),
-        ode_solver(config.solver),
-        t0=0.0,
-        t1=period,
-        dt0=None,
-        y0=x0,
-        stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
-        saveat=diffrax.SaveAt(t1=True),
-        event=event,
-        max_steps=config.max_steps,
-        throw=False,
-    )
+    sol = flow(model, x0, period, config, event=event)
     assert sol.ys is not None  # saved at the end
     reached = sol.result == diffrax.RESULTS.successful
     return reached & (s * sol.ys[-1, n] > margin) & jnp.all(jnp.isfinite(sol.ys))
