@@ -9,7 +9,8 @@ steps in Python, at the same rtol/atol, on a subset of the walkers (its cost is 
 the number of walker-steps). Compile time is reported separately from run time (best of
 `--repeats`). Both must agree on the step periods.
 
-    python benchmarks/bench_simulate.py [--solver dopri8] [--cpu-devices 2] [--quick] [--json OUT]
+    python benchmarks/bench_simulate.py [--solver dopri8] [--cpu-devices 2] [--trig plain]
+        [--quick] [--json OUT]
 """
 
 import argparse
@@ -46,6 +47,13 @@ def main(argv=None):
         default=1,
         help="split the batch over this many CPU devices (XLA host devices)",
     )
+    ap.add_argument(
+        "--trig",
+        choices=("library", "plain"),
+        default="library",
+        help="sin/cos in the model: the library's (each angle's pair computed once, see "
+        "vhcjax.trig) or plain jnp.sin/jnp.cos, to measure what that buys (default library)",
+    )
     ap.add_argument("--quick", action="store_true", help="small sizes (N=64, K=3)")
     ap.add_argument("--json", metavar="OUT", help="write the results as JSON")
     args = ap.parse_args(argv)
@@ -61,6 +69,9 @@ def main(argv=None):
     import jax.numpy as jnp
 
     import vhcjax as vj
+
+    if args.trig == "plain":  # the same model, traced with plain jnp.sin/jnp.cos
+        vj.trig.sin_cos = lambda x: (jnp.sin(x), jnp.cos(x))
 
     psi = math.radians(3.0)
     rng = np.random.default_rng(0)
@@ -115,6 +126,7 @@ def main(argv=None):
         "steps": args.steps,
         "rtol": args.rtol,
         "solver": args.solver,
+        "trig": args.trig,
         "scipy_method": args.scipy_method,
         "compile_s": compile_s,
         "run_s": run_s,

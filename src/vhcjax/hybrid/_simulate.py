@@ -16,7 +16,6 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from .. import trig
 from .._batching import host_workers, in_chunks, round_to_devices, shard_batch
 from .._programs import stored_jit
 from .._results import RESULTS
@@ -292,6 +291,8 @@ class Simulation(eqx.Module):
     - `dense_t`, `dense_x`: with `dense_points > 0`, per step a grid of `dense_points`
       times from 0 to the step period (step-local time) and the states there
       (shapes `(num_steps, dense_points)` and `(num_steps, dense_points, 2n)`); else None.
+      A multi-domain model has `dense_points` times per domain, joined in order (the
+      reset at each domain's end is a jump between consecutive points).
     """
 
     steps: StepResult
@@ -338,7 +339,12 @@ def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
             sr.impulse,
             result,
         )
-        if dense_points:
+        if dense_points and hasattr(model, "num_domains"):  # a MultiDomainModel
+            from ._multidomain import dense_cycle
+
+            ts, ys = dense_cycle(model, x, dense_points, config, alive)
+            dense = (jnp.where(alive, ts, 0.0), jnp.where(alive, ys, x))
+        elif dense_points:
             ts = jnp.linspace(0.0, 1.0, dense_points) * jnp.where(alive, sr.period, 0.0)
             sol = flow(
                 model,
@@ -355,8 +361,7 @@ def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
         return (x_next, ok, new_fail), (out, dense)
 
     init = (x0, valid, RESULTS.where(valid, RESULTS.successful, RESULTS.bad_input))
-    with trig.polynomial():  # many walkers x many steps: vectorizable sin/cos (see `trig`)
-        (_, _, first_fail), (steps, dense) = jax.lax.scan(body, init, None, length=num_steps)
+    (_, _, first_fail), (steps, dense) = jax.lax.scan(body, init, None, length=num_steps)
     num_ok = jnp.sum(steps.result._value == RESULTS.successful._value)
     dense_t, dense_x = (None, None) if dense is None else dense
     return Simulation(steps, first_fail, num_ok, x0, dense_t, dense_x)

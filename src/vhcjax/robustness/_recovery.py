@@ -13,7 +13,6 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .. import trig
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import FAST_CONFIG, step_unchecked
@@ -81,19 +80,18 @@ def recover(
 
     **Returns:** a `Recovery`.
     """
-    with trig.polynomial():  # many walkers x many steps: vectorizable sin/cos (see `trig`)
-        return _recover(
-            model,
-            x0,
-            x_star,
-            num_steps,
-            tol,
-            cycle_tol,
-            max_period,
-            config,
-            first_step,
-            stop_when_converged,
-        )
+    return _recover(
+        model,
+        x0,
+        x_star,
+        num_steps,
+        tol,
+        cycle_tol,
+        max_period,
+        config,
+        first_step,
+        stop_when_converged,
+    )
 
 
 def _recover(
