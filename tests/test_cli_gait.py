@@ -2,9 +2,6 @@
 
 import csv
 import json
-import os
-import subprocess
-import sys
 
 import numpy as np
 import pytest
@@ -143,72 +140,3 @@ def test_sweep_csv_png(tmp_path, capsys):
     np.testing.assert_allclose(float(r3["a"]), 0.204676, atol=6e-7)  # thesis (7.9)
     assert png_path.stat().st_size > 10_000
     assert "found at 3 of 3" in capsys.readouterr().out
-
-
-SCRIPT_CACHE = """
-import logging, sys
-import vhcjax as vj
-logging.basicConfig(stream=sys.stderr)
-logging.getLogger("jax._src.compiler").setLevel(logging.DEBUG)
-vj.enable_compilation_cache(sys.argv[1])
-for method in ("vhc", "shooting"):
-    g = vj.find_gait(vj.CompassGait(), "stable", method, guess=(0.2, -1.0))
-    print(repr(float(g.a)), repr(float(g.b)), repr(float(g.T)))
-"""
-
-
-def test_compiled_search_kept_on_disk_and_read_back(tmp_path):
-    """`enable_compilation_cache`: the programs of both searches are stored, traced
-    (`programs/`) and compiled (neither holds a host callback); a second process reads
-    both back (JAX reports two cache hits) and finds the same gaits."""
-    cache = tmp_path / "xla"
-    env = dict(os.environ, VHCJAX_PROGRAMS="on")
-    cmd = [sys.executable, "-c", SCRIPT_CACHE, str(cache)]
-    first = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
-    assert first.returncode == 0, first.stderr[-2000:]
-    stored = sorted(p.name for p in cache.iterdir())
-    assert sum(name.startswith("jit__search-") for name in stored) == 2, stored
-    traced = sorted(p.name for p in (cache / "programs").iterdir())
-    assert sum(name.startswith("search-") for name in traced) == 2, traced
-    second = subprocess.run(cmd, env=env, capture_output=True, text=True, timeout=600)
-    assert second.returncode == 0, second.stderr[-2000:]
-    assert second.stderr.count("Persistent compilation cache hit for 'jit__search'") == 2
-    assert second.stdout == first.stdout
-
-
-def test_kneed_walker_gait_and_multipliers(capsys):
-    """`vhcjax gait --model kneed --method shooting` at the kneed walker's slope (0.0504
-    rad): the gait repeats under simulation, its multipliers are those of the library's
-    Poincare Jacobian (and the VHC search is refused with one line)."""
-    import json
-
-    import jax.numpy as jnp
-
-    rc = main(
-        [
-            "gait",
-            "--model",
-            "kneed",
-            "--method",
-            "shooting",
-            "--slope-deg",
-            "2.887707287459349",
-            "--json",
-        ]
-    )
-    assert rc == 0
-    rec = json.loads(capsys.readouterr().out)
-    assert rec["result"] == "successful" and rec["stable"] is True
-    np.testing.assert_allclose(rec["z"], [0.18818546, -1.10958733, -0.05714811], atol=1e-8)
-    np.testing.assert_allclose(rec["period"], 0.56432817, atol=1e-8)
-    kw = vj.KneedWalker()
-    sim = vj.simulate(kw, jnp.asarray(rec["x0"]), 3)
-    np.testing.assert_allclose(np.asarray(sim.steps.x_plus[-1]), rec["x0"], atol=1e-9)
-    ev = sorted(
-        np.abs(np.asarray(rec["multipliers"])[:, 0] + 1j * np.asarray(rec["multipliers"])[:, 1])
-    )
-    from vhcjax.stability import finite_difference_jacobian  # central differences
-
-    ref = np.asarray(finite_difference_jacobian(kw, jnp.asarray(rec["z"])))
-    np.testing.assert_allclose(ev, sorted(np.abs(np.linalg.eigvals(ref))), atol=1e-5)
-    assert main(["gait", "--model", "kneed", "--slope-deg", "3"]) == 2

@@ -109,6 +109,8 @@ def test_bad_numeric_value_one_line_exit_2(capsys, cmd, flag, nargs, value):
         (["bifurcation", "--slope-deg", "29:31:1"], "(0, 30)"),
         (["basin", "--axes", "q1,q1"], "two different"),
         (["simulate", "--animate", "walk.mp4"], ".gif"),
+        (["gait", "--transverse", "--no-stability"], "--no-stability"),
+        (["gait", "--model", "kneed", "--method", "shooting", "--transverse"], "Poincare map"),
     ],
 )
 def test_other_refusals(capsys, argv, message):

@@ -1,6 +1,8 @@
 """The passive kneed walker: a two-domain model run by the unchanged simulator, step map,
 Newton shooting and Poincare multipliers."""
 
+import json
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -9,6 +11,7 @@ import pytest
 
 import vhcjax
 from vhcjax._results import RESULTS
+from vhcjax.cli import main
 from vhcjax.hybrid import _poincare as P
 from vhcjax.hybrid._multidomain import multidomain_trajectory
 from vhcjax.models._kneed_walker import KneedWalker
@@ -22,7 +25,7 @@ GUESS = jnp.array([0.19, -1.10, -0.04])  # near the Hsu Chen (2007) initial cond
 
 @pytest.fixture(scope="module")
 def kw():
-    return KneedWalker(psi=jnp.asarray(0.0504))
+    return KneedWalker()  # psi = 0.0504 rad, as `vhcjax ... --model kneed` builds it
 
 
 @pytest.fixture(scope="module")
@@ -159,3 +162,108 @@ def test_slope_range_by_continuation(kw, gait):
     dist = np.max(np.abs(np.asarray(zs) - np.asarray(z)), axis=1)
     assert dist[0] < 1e-4  # starts next to the gait ...
     assert not ok.all() or dist.max() > 1e-3  # ... and leaves it
+
+
+def test_dense_simulation_joins_the_domains(kw, gait):
+    """`simulate(..., dense_points=N)` of a two-domain model: N points per domain, joined;
+    each step's last point is the event solver's pre-impact state at its period, and the
+    angles are continuous across the knee strike (only velocities jump)."""
+    # 3 steps of 40 points per domain: the program `vhcjax simulate --plots` runs
+    sim = simulate_jit(kw, gait.x0, 3, dense_points=40)
+    assert sim.dense_t is not None and sim.dense_x is not None
+    t, x = np.asarray(sim.dense_t), np.asarray(sim.dense_x)
+    assert x.shape == (3, 80, 6)
+    starts = np.concatenate([np.asarray(gait.x0)[None], np.asarray(sim.steps.x_plus[:-1])])
+    np.testing.assert_allclose(x[:, 0], starts, atol=1e-12)
+    np.testing.assert_allclose(x[:, -1], sim.steps.x_minus, atol=1e-9)
+    np.testing.assert_allclose(t[:, -1], sim.steps.period, rtol=1e-12)
+    np.testing.assert_allclose(x[:, 39, :3], x[:, 40, :3], atol=1e-12)  # knee strike
+    assert np.all(np.diff(t, axis=1) >= 0)
+    assert np.all(np.abs(x[:, 39, 3:] - x[:, 40, 3:]).max(axis=1) > 1e-3)
+
+
+# ---- the command line with --model kneed ------------------------------------------------
+
+SLOPE_DEG = "2.887707287459349"  # 0.0504 rad
+
+
+def _json(capsys, argv):
+    assert main(argv) == 0
+    return json.loads(capsys.readouterr().out)
+
+
+def test_cli_gait_and_multipliers(capsys, kw, gait):
+    """`vhcjax gait --model kneed --method shooting` gives the library's gait, with the
+    eigenvalues of the step map's Jacobian (which central differences confirm in
+    `test_multipliers_autodiff_vs_central_differences`); `vhcjax multipliers --model
+    kneed` the same ones. The VHC search and the other model's flags are refused with one
+    line."""
+    rec = _json(
+        capsys,
+        ["gait", "--model", "kneed", "--method", "shooting", "--slope-deg", SLOPE_DEG, "--json"],
+    )
+    assert rec["result"] == "successful" and rec["stable"] is True
+    np.testing.assert_allclose(rec["z"], gait.z, atol=1e-10)
+    np.testing.assert_allclose(rec["z"], [0.18818546, -1.10958733, -0.05714811], atol=1e-8)
+    np.testing.assert_allclose(rec["period"], 0.56432817, atol=1e-8)
+    ev = np.asarray(rec["multipliers"])
+    ev = np.sort(np.abs(ev[:, 0] + 1j * ev[:, 1]))
+    J = np.linalg.eigvals(np.asarray(jacobian_jit(kw, gait.z)))
+    np.testing.assert_allclose(ev, np.sort(np.abs(J)), atol=1e-9)
+
+    m = _json(
+        capsys,
+        ["multipliers", "--model", "kneed", "--method", "shooting"]
+        + ["--slope-deg", SLOPE_DEG, "--json"],
+    )
+    assert m["model"] == "kneed" and m["stable"] is True
+    assert m["multipliers"] is None and "Poincare" in m["multipliers_reason"]
+    pm = np.asarray(m["multipliers_poincare"])
+    np.testing.assert_allclose(np.sort(np.abs(pm[:, 0] + 1j * pm[:, 1])), ev, atol=1e-10)
+    np.testing.assert_allclose(m["max_abs_multiplier"], ev[-1], atol=1e-10)
+
+    for argv in (
+        ["gait", "--model", "kneed", "--slope-deg", "3"],
+        ["multipliers", "--model", "kneed"],
+        ["gait", "--model", "kneed", "--method", "shooting", "--a", "0.4"],
+        ["basin", "--mass-shank", "0.1"],
+    ):
+        assert main(argv) == 2
+        assert len(capsys.readouterr().err.strip().splitlines()) == 1
+
+
+def test_cli_simulate_json_figures_and_animation(capsys, gait, tmp_path):
+    """`vhcjax simulate --model kneed` starts on the gait by default and repeats it; the
+    three figures and the GIF are written; a compass-gait state is refused."""
+    gif = tmp_path / "walk.gif"
+    rec = _json(
+        capsys,
+        ["simulate", "--model", "kneed", "--slope-deg", SLOPE_DEG, "--steps", "3", "--json"]
+        + ["--plots", str(tmp_path), "--animate", str(gif)],
+    )
+    assert rec["result"] == "successful" and rec["num_successful"] == 3
+    for s in rec["steps"]:
+        np.testing.assert_allclose(s["x_plus"], gait.x0, atol=1e-7)
+        np.testing.assert_allclose(s["period"], gait.periods[0], rtol=1e-7)
+    for name in ("states.png", "phase.png", "periods.png"):
+        assert (tmp_path / name).stat().st_size > 10_000, name
+    assert gif.stat().st_size > 10_000
+    assert main(["simulate", "--model", "kneed", "--x0", "0.2", "-0.3", "-1", "0"]) == 2
+    assert "6 numbers" in capsys.readouterr().err
+
+
+def test_cli_basin(capsys, kw, gait):
+    """`vhcjax basin --model kneed`: a small slice around the kneed gait converges, as
+    plain simulations from its corners do."""
+    rec = _json(
+        capsys,
+        ["basin", "--model", "kneed", "--slope-deg", SLOPE_DEG, "--grid", "3", "3"]
+        + ["--half-widths", "0.01", "0.05", "--steps", "40", "--json", "--quiet"],
+    )
+    np.testing.assert_allclose(rec["gait"], gait.z, atol=1e-10)
+    assert rec["counts"]["converged"] == 9 and rec["fraction"] == 1.0
+    for dz in ([0.01, 0.05, 0.0], [-0.01, -0.05, 0.0]):
+        sim = simulate_jit(kw, kw.section_to_state(gait.z + jnp.asarray(dz)), 100)
+        assert sim.result == RESULTS.successful
+        z_end = kw.state_to_section(sim.steps.x_plus[-1])
+        assert np.max(np.abs(z_end - gait.z)) < 1e-4

@@ -16,41 +16,64 @@ import vhcjax as vj
 from vhcjax import _programs
 
 SCRIPT = """
-import json, math
+import json, logging, math, sys
 import numpy as np
 import vhcjax as vj
 from vhcjax import _programs
+logging.basicConfig(stream=sys.stderr)
+logging.getLogger("jax._src.compiler").setLevel(logging.DEBUG)
 m = vj.CompassGait(psi=math.radians(3.0))
 z = np.array([0.2187, -1.0924, -0.3774])
 sim = vj.simulate(m, m.section_to_state(z), 3)
 ev = vj.hybrid.multipliers_jit(m, z)
+gaits = []
+if sys.argv[1:] == ["search"]:  # both searches (VHC, shooting) from a guess
+    for method in ("vhc", "shooting"):
+        g = vj.find_gait(vj.CompassGait(), "stable", method, guess=(0.2, -1.0))
+        gaits.append([float(g.a), float(g.b), float(g.T)])
 print(json.dumps({"x": np.asarray(sim.steps.x_plus).tolist(),
                   "p": [[complex(v).real, complex(v).imag] for v in np.asarray(ev)],
-                  "stats": _programs.stats}))
+                  "gaits": gaits, "stats": _programs.stats}))
 """
 
 
-def _run(env):
+def _run(env, *args):
     out = subprocess.run(
-        [sys.executable, "-c", SCRIPT], env=env, capture_output=True, text=True, timeout=900
+        [sys.executable, "-c", SCRIPT, *args],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
     )
     assert out.returncode == 0, out.stderr[-2000:]
-    return json.loads(out.stdout.splitlines()[-1])
+    return json.loads(out.stdout.splitlines()[-1]), out.stderr
 
 
 def test_a_second_process_loads_the_programs_and_gets_the_same_numbers(tmp_path):
-    env = dict(os.environ, VHCJAX_CACHE_DIR=str(tmp_path / "cache"), VHCJAX_PROGRAMS="on")
-    first = _run(env)
-    assert first["stats"]["exported"] >= 2 and first["stats"]["loaded"] == 0
-    second = _run(env)
-    # nothing traced again: the simulation and the multipliers come from disk
-    assert second["stats"]["exported"] == 0 and second["stats"]["loaded"] >= 2
-    assert second["x"] == first["x"] and second["p"] == first["p"]
+    """The simulation, the multipliers and both gait searches are stored, traced
+    (`programs/`) and compiled (none holds a host callback); a second process loads them
+    all (nothing traced, JAX reports a compilation-cache hit for each search) and gets the
+    same numbers, which are those of the plain path."""
+    cache = tmp_path / "cache"
+    env = dict(os.environ, VHCJAX_CACHE_DIR=str(cache), VHCJAX_PROGRAMS="on")
+    first, _ = _run(env, "search")
+    assert first["stats"]["exported"] >= 4 and first["stats"]["loaded"] == 0
+    (versioned,) = cache.iterdir()  # vhcjax-<version>-jax-<version>
+    stored = sorted(p.name for p in versioned.iterdir())
+    assert sum(name.startswith("jit__search-") for name in stored) == 2, stored
+    traced = sorted(p.name for p in (versioned / "programs").iterdir())
+    assert sum(name.startswith("search-") for name in traced) == 2, traced
+    second, log = _run(env, "search")
+    # nothing traced again: the simulation, the multipliers and the searches come from disk
+    assert second["stats"]["exported"] == 0 and second["stats"]["loaded"] >= 4
+    assert log.count("Persistent compilation cache hit for 'jit__search'") == 2
+    assert second == dict(first, stats=second["stats"])
     # and they are the numbers of the plain path (a third process without stored programs)
-    plain = _run(dict(env, VHCJAX_PROGRAMS="off"))
+    plain, _ = _run(dict(env, VHCJAX_PROGRAMS="off"))
     assert plain["stats"] == {"exported": 0, "loaded": 0, "unexportable": 0}
     np.testing.assert_allclose(plain["x"], first["x"], rtol=0, atol=1e-12)
     np.testing.assert_allclose(plain["p"], first["p"], rtol=0, atol=1e-10)
+    np.testing.assert_allclose(first["gaits"][0], first["gaits"][1], rtol=1e-9)  # VHC = shooting
 
 
 @pytest.fixture

@@ -4,7 +4,9 @@ multipliers in the complex plane."""
 import math
 
 from ._common import (
+    KNEED_SEED,
     CLIError,
+    add_model_choice,
     add_model_flags,
     check_output_file,
     check_slope_deg,
@@ -14,6 +16,7 @@ from ._common import (
     parse_range,
     print_json,
     progress,
+    walker_from_args,
     warn,
 )
 
@@ -67,13 +70,15 @@ def register(subparsers):
         "strike events; optional plot with the unit circle (thesis Figs 7.1, 7.8, 7.15).",
     )
     add_model_flags(q)
+    add_model_choice(q)
     q.add_argument("--family", choices=["stable", "unstable"], default="stable")
     q.add_argument(
         "--method",
         choices=["vhc", "shooting"],
         default="vhc",
         help="gait search: vhc = thesis Problem 1, shooting = Problem 2 (default "
-        "%(default)s; the VHC search needs q1 monotone along the step)",
+        "%(default)s; the VHC search needs q1 monotone along the step; the kneed walker: "
+        "shooting from its gait at 0.0504 rad, Poincare multipliers only)",
     )
     q.add_argument("--png", metavar="FILE", help="save the complex-plane plot")
     q.add_argument("--json", action="store_true", help="print a JSON object")
@@ -92,24 +97,47 @@ def run_multipliers(args):
     from .._results import result_names
     from ._multiplier_fields import stability_json
 
-    model = model_from_args(args)
+    kneed = args.model == "kneed"
+    if kneed and args.method != "shooting":
+        raise CLIError("the kneed walker's gaits are found by shooting: use --method shooting")
+    model = walker_from_args(args)
     check_output_file(args.png, "--png")
-    from ..gait import find_gait
+    if kneed:  # its one gait family, from the gait at its default slope
+        import jax.numpy as jnp
 
-    # continued from the default model's gait to this model (any parameters)
-    gait = find_gait(model, args.family, args.method, throw=False)
-    if result_names(gait.result) != "successful":
-        raise CLIError(
-            f"no {args.family} gait found at {args.slope_deg} deg by "
-            f"{args.method} ({result_names(gait.result)}); try --method "
-            f"{'shooting' if args.method == 'vhc' else 'vhc'}"
+        from ..hybrid import fixed_point_jit
+
+        fp = fixed_point_jit(model, jnp.asarray(KNEED_SEED))
+        found, z = result_names(fp.result), fp.z
+        gm = S.gait_multipliers_jit(model, z, transverse=False)
+    else:
+        from ..gait import find_gait
+
+        # continued from the default model's gait to this model (any parameters)
+        gait = find_gait(model, args.family, args.method, throw=False)
+        found = result_names(gait.result)
+        z = model.state_to_section(gait.x_plus)
+        gm = None if found != "successful" else S.gait_multipliers_jit(model, z)
+    if gm is None or found != "successful":
+        hint = (
+            "the seed is the gait at 0.0504 rad: try a slope nearer to 2.89 deg"
+            if kneed
+            else f"try --method {'shooting' if args.method == 'vhc' else 'vhc'}"
         )
-    z = model.state_to_section(gait.x_plus)
-    gm = S.gait_multipliers_jit(model, z)
-    tr, pc = np.asarray(gm.transverse), np.asarray(gm.poincare)
+        raise CLIError(
+            f"no {'kneed-walker' if kneed else args.family} gait found at "
+            f"{args.slope_deg} deg by {args.method} ({found}); {hint}"
+        )
+    pc = np.asarray(gm.poincare)
+    tr = None if gm.transverse is None else np.asarray(gm.transverse)
     stab = stability_json(gm)
+    if kneed:
+        stab["multipliers_reason"] = (
+            "the transverse linearization is computed for the compass gait; the kneed "
+            "walker's multipliers are the Poincare map's"
+        )
     trusted = stab["multipliers"] is not None
-    if not trusted:
+    if not trusted and not kneed:
         warn(args, stab["multipliers_reason"])
     if args.png:
         from ..plotting import plot_multipliers_complex
@@ -119,19 +147,18 @@ def run_multipliers(args):
             if trusted
             else ([pc], ["Poincare (autodiff)"])
         )
-        plot_multipliers_complex(
-            sets, labels, args.png, title=f"{args.family} family, {describe(args)}"
-        )
-    out = {"slope_deg": args.slope_deg, "family": args.family, "z": np.asarray(z), **stab}
+        title = describe(args) if kneed else f"{args.family} family, {describe(args)}"
+        plot_multipliers_complex(sets, labels, args.png, title=title)
+    family = None if kneed else args.family  # the kneed walker: its one family
+    out = {"slope_deg": args.slope_deg, "family": family, "z": np.asarray(z), **stab}
+    out["model"] = args.model
     if args.json:
         print_json(out)
     else:
-        print(
-            f"gait of the {args.family} family at {args.slope_deg} deg ({args.method}): "
-            f"z = {np.asarray(z)}"
-        )
-        for a, b in zip(tr, pc):
-            left = f"{a:.8f}" if trusted else "(not used)"
+        what = "kneed-walker gait" if kneed else f"gait of the {args.family} family"
+        print(f"{what} at {args.slope_deg} deg ({args.method}): z = {np.asarray(z)}")
+        for i, b in enumerate(pc):
+            left = f"{tr[i]:.8f}" if trusted and tr is not None else "(not used)"
             print(f"  transverse {left}   poincare {b:.8f}")
         verdict = "stable" if stab["stable"] else "unstable"
         print(

@@ -136,6 +136,11 @@ def add_model_flags(parser, *, slope=True, slope_default=3.0):
     return g
 
 
+#: Section point (q1, dq1, dq2) of the kneed walker's gait at its default slope (0.0504
+#: rad): the default seed of its gait searches.
+KNEED_SEED = (0.18818546, -1.10958733, -0.05714811)
+KNEED_SLOPE_DEG = math.degrees(0.0504)
+
 #: Kneed-walker flags: (dest, flag, KneedWalker field, help).
 KNEED_FLAGS = (
     ("mass_shank", "--mass-shank", "ms", "shank mass in kg (default 0.05)"),
@@ -157,6 +162,13 @@ def add_model_choice(parser):
         help="compass gait (thesis) or passive kneed walker (Hsu Chen 2007 "
         "parameters; --mass-hip defaults to 0.5 kg for it) (default %(default)s)",
     )
+    for action in parser._actions:  # --slope-deg: each model's default (`walker_from_args`)
+        if action.dest == "slope_deg":
+            action.default = None
+            action.help = (
+                "slope angle in degrees, in (0, 30) (default 3; with --model kneed "
+                f"{KNEED_SLOPE_DEG:.6g}, the slope of its reference gait)"
+            )
     g = parser.add_argument_group("kneed walker (with --model kneed)")
     for dest, flag, _, text in KNEED_FLAGS:
         g.add_argument(flag, dest=dest, type=POSITIVE, default=None, help=text)
@@ -183,6 +195,25 @@ def kneed_from_args(args, slope_deg):
 
 
 _COMPASS_DEFAULTS = {"mass_hip": 10.0, "gravity": 9.81}
+_COMPASS_ONLY = (("mass_leg", "--mass-leg", 5.0), ("a", "--a", 0.5), ("b", "--b", 0.5))
+
+
+def walker_from_args(args, slope_deg=None):
+    """The model `--model` names (compass gait by default), built from its flags; a flag
+    of the other model is refused with one line, never ignored."""
+    kneed = getattr(args, "model", "compass") == "kneed"
+    if args.slope_deg is None:  # not given: the model's own default
+        args.slope_deg = KNEED_SLOPE_DEG if kneed else 3.0
+    slope = args.slope_deg if slope_deg is None else slope_deg
+    if kneed:
+        for dest, flag, default in _COMPASS_ONLY:
+            if getattr(args, dest) != default:
+                raise CLIError(f"{flag} is a compass-gait parameter: not with --model kneed")
+        return kneed_from_args(args, slope)
+    for dest, flag, _, _ in KNEED_FLAGS:
+        if getattr(args, dest, None) is not None:
+            raise CLIError(f"{flag} is a kneed-walker parameter: add --model kneed")
+    return model_from_args(args, slope)
 
 
 def check_finite(name, *values):
@@ -225,6 +256,14 @@ def describe(args, slope_deg=None):
     from thesis Table 1, e.g. `"slope 3 deg, mH 0.1 kg, m 10 kg"`."""
     slope = args.slope_deg if slope_deg is None else slope_deg
     parts = [slope if isinstance(slope, str) else f"slope {slope:g} deg"]
+    if getattr(args, "model", "compass") == "kneed":
+        parts.append("kneed walker")
+        extra = (("mass_hip", "--mass-hip", "", ""), ("gravity", "--gravity", "", ""))
+        for dest, flag, _, _ in KNEED_FLAGS + extra:
+            v = getattr(args, dest, None)
+            if v is not None and v != _COMPASS_DEFAULTS.get(dest):
+                parts.append(f"{flag[2:]} {v:g}")
+        return ", ".join(parts)
     for flag, default, label in (
         ("mass_hip", 10.0, "mH {} kg"),
         ("mass_leg", 5.0, "m {} kg"),

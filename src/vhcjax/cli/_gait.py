@@ -7,17 +7,18 @@ from typing import Any
 
 from ._common import (
     FINITE,
+    KNEED_SEED,
     CLIError,
     add_model_choice,
     add_model_flags,
     check_output_file,
     check_slope_deg,
     describe,
-    kneed_from_args,
     model_from_args,
     parse_range,
     print_json,
     progress,
+    walker_from_args,
     warn,
 )
 from ._multiplier_fields import CSV_COLUMNS as STABILITY_COLUMNS
@@ -148,11 +149,6 @@ def gait_json(gait, slope_deg) -> dict[str, Any]:
     }
 
 
-#: Section point of the kneed walker's gait at its default slope (0.0504 rad), the seed
-#: of its shooting search.
-KNEED_SEED = (0.18818546, -1.10958733, -0.05714811)
-
-
 def run_gait(args):
     import jax.numpy as jnp
 
@@ -164,9 +160,15 @@ def run_gait(args):
             raise CLIError(
                 f"--guess takes {' or '.join(map(str, sizes))} numbers here, got {len(args.guess)}"
             )
+    if args.transverse and args.no_stability:
+        raise CLIError("--transverse computes multipliers: it cannot go with --no-stability")
     if args.model == "kneed":
+        if args.transverse:
+            raise CLIError(
+                "the kneed walker's multipliers come from its Poincare map only: drop --transverse"
+            )
         return _run_kneed_gait(args)
-    model = model_from_args(args)
+    model = walker_from_args(args)
     guess = None if args.guess is None else jnp.asarray(args.guess)
     gait = find_gait(model, args.family, args.method, guess, throw=False)
     rec = gait_json(gait, args.slope_deg)
@@ -223,11 +225,12 @@ def _run_kneed_gait(args):
     import numpy as np
 
     from .._results import result_names
-    from ..hybrid import fixed_point_jit as fixed_point, multipliers_jit as poincare_multipliers
+    from ..hybrid import fixed_point_jit as fixed_point
+    from ..stability import gait_multipliers
 
     if args.method != "shooting":
         raise CLIError("the kneed walker's gaits are found by shooting: use --method shooting")
-    model = kneed_from_args(args, args.slope_deg)
+    model = walker_from_args(args)
     guess = jnp.asarray(args.guess if args.guess is not None else KNEED_SEED)
     fp = fixed_point(model, guess)
     result = result_names(fp.result)
@@ -242,23 +245,26 @@ def _run_kneed_gait(args):
         "iterations": int(fp.iterations),
     }
     if result == "successful":
-        ev = np.asarray(poincare_multipliers(model, fp.z))
-        ev = ev[np.argsort(-np.abs(ev))]
+        rec["period"] = float(fp.periods[0])
+    if result == "successful" and not args.no_stability:
+        # the program of `vhcjax multipliers --model kneed`: sorted by modulus
+        ev = np.asarray(gait_multipliers(model, fp.z, transverse=False).poincare)
         radius = float(np.max(np.abs(ev)))
-        rec.update(
-            period=float(fp.periods[0]), multipliers=ev, spectral_radius=radius, stable=radius < 1.0
-        )
+        rec.update(multipliers=ev, spectral_radius=radius, stable=radius < 1.0)
     if args.json:
         print_json(rec)
     else:
         print(f"kneed walker gait at {args.slope_deg} deg (shooting): {result}")
         if result == "successful":
             print("  z = (q1, dq1, dq2) = " + ", ".join(f"{v:.8f}" for v in rec["z"]))
-            print(
-                f"  period {rec['period']:.8f} s, multipliers "
-                + ", ".join(f"{complex(v):.5f}" for v in rec["multipliers"])
-                + f" ({'stable' if rec['stable'] else 'unstable'})"
-            )
+            line = f"  period {rec['period']:.8f} s"
+            if "multipliers" in rec:
+                line += (
+                    ", multipliers "
+                    + ", ".join(f"{complex(v):.5f}" for v in rec["multipliers"])
+                    + f" ({'stable' if rec['stable'] else 'unstable'})"
+                )
+            print(line)
     return 0 if result == "successful" else 1
 
 

@@ -4,16 +4,18 @@ import math
 
 from ._common import (
     FINITE,
+    KNEED_SEED,
     POSITIVE,
     CLIError,
+    add_model_choice,
     add_model_flags,
     check_output_file,
     count,
     describe,
-    model_from_args,
     number,
     print_json,
     progress,
+    walker_from_args,
 )
 
 STABLE_SEED = (0.2186688, -1.09238359, -0.37737395)  # stable 3-degree gait (Newton seed)
@@ -32,9 +34,9 @@ def _common(p, png_help):
         type=FINITE,
         nargs=3,
         metavar=("Q1", "DQ1", "DQ2"),
-        default=list(STABLE_SEED),
+        default=None,
         help="Newton seed for the gait: post-impact q1 (rad), dq1, dq2 (rad/s); "
-        "default: the stable 3-degree gait",
+        "default: the stable 3-degree gait (the kneed walker: its gait at 0.0504 rad)",
     )
     p.add_argument("--json", action="store_true", help="print the results as one JSON object")
     p.add_argument("--png", metavar="FILE", help=png_help)
@@ -49,7 +51,9 @@ def _gait(args):
     from .._results import result_names
     from ..hybrid import fixed_point_jit
 
-    model = model_from_args(args)
+    model = walker_from_args(args)
+    if args.gait is None:
+        args.gait = list(KNEED_SEED if getattr(args, "model", "") == "kneed" else STABLE_SEED)
     fp = fixed_point_jit(model, jnp.asarray(args.gait, float))
     if result_names(fp.result) != "successful":
         raise CLIError(
@@ -97,6 +101,7 @@ def register(subparsers):
         "estimate of the basin's volume fraction in a 3-D box.",
     )
     _common(p, "save the basin slice coloured by steps to converge")
+    add_model_choice(p)
     p.add_argument("--axes", default="q1,dq1", help="two of q1,dq1,dq2 (default q1,dq1)")
     p.add_argument(
         "--half-widths",

@@ -5,14 +5,16 @@ import os
 
 from ._common import (
     FINITE,
+    KNEED_SEED,
     CLIError,
+    add_model_choice,
     add_model_flags,
     check_output_dir,
     check_output_file,
     count,
     describe,
-    model_from_args,
     print_json,
+    walker_from_args,
 )
 
 THESIS_7_5 = (0.218669, -0.323389, -1.092386, -0.377377)  # thesis (7.5), 3 degrees
@@ -23,20 +25,24 @@ DENSE_POINTS = 40
 def register(subparsers):
     p = subparsers.add_parser(
         "simulate",
-        help="simulate the passive compass gait for a number of steps",
-        description="Simulate the passive compass-gait biped from a post-impact state: swing "
-        "phases integrated to the exact heel strike (diffrax event), impact map, leg swap. "
+        help="simulate the passive compass gait (or kneed walker) for a number of steps",
+        description="Simulate the passive compass-gait biped (or, with --model kneed, the "
+        "kneed walker) from a post-impact state: swing phases integrated to the exact heel "
+        "strike (diffrax event), impact map, leg swap. "
         "Angles in radians (except --slope-deg), velocities in rad/s.",
     )
     add_model_flags(p)
+    add_model_choice(p)
     p.add_argument(
         "--x0",
         type=FINITE,
-        nargs=4,
-        metavar=("Q1", "Q2", "DQ1", "DQ2"),
-        default=list(THESIS_7_5),
-        help="initial state: stance and swing leg angles (rad, from the vertical, "
-        "counter-clockwise) and their rates (rad/s); default: thesis (7.5)",
+        nargs="+",
+        metavar="X",
+        default=None,
+        help="initial state: the joint angles (rad, from the vertical, counter-clockwise) "
+        "and their rates (rad/s): Q1 Q2 DQ1 DQ2 for the compass gait (stance and swing "
+        "leg; default: thesis (7.5)), Q1 Q2 Q3 DQ1 DQ2 DQ3 for the kneed walker (stance "
+        "leg, swing thigh, swing shank; default: its gait at 0.0504 rad)",
     )
     p.add_argument(
         "--steps",
@@ -78,6 +84,14 @@ def _check_start(model, x0):
         )
 
 
+def _kneed_start(model):
+    """The post-impact state of the kneed walker's gait at 0.0504 rad, moved to the
+    slope of `model` (the same section point)."""
+    import jax.numpy as jnp
+
+    return [float(v) for v in model.section_to_state(jnp.asarray(KNEED_SEED))]
+
+
 def steps_as_dicts(sim):
     """Per-step records up to and including the first failure (`x_plus` is None there)."""
     import numpy as np
@@ -109,8 +123,16 @@ def run(args):
     from .._results import result_names
     from ..hybrid import simulate_jit
 
-    model = model_from_args(args)
-    _check_start(model, args.x0)
+    model = walker_from_args(args)
+    if args.x0 is None:
+        args.x0 = list(THESIS_7_5) if args.model == "compass" else _kneed_start(model)
+    if len(args.x0) != 2 * model.n_dof:
+        names = "Q1 Q2 DQ1 DQ2" if args.model == "compass" else "Q1 Q2 Q3 DQ1 DQ2 DQ3"
+        raise CLIError(f"--x0 takes {2 * model.n_dof} numbers ({names}) here, got {len(args.x0)}")
+    if args.model == "compass":
+        _check_start(model, args.x0)
+    elif bool(model.fallen(jnp.asarray(args.x0[:3], float))):
+        raise CLIError(f"--x0 is a fallen kneed walker (angles {args.x0[:3]} rad)")
     if args.animate is not None and not args.animate.lower().endswith(".gif"):
         raise CLIError(f"--animate needs a .gif file name, got {args.animate!r}")
     check_output_file(args.animate, "--animate")
@@ -125,7 +147,8 @@ def run(args):
         from .. import plotting as plotting
 
         if int(sim.num_successful) > 0:
-            case = f"{describe(args)}, from x0 = {list(args.x0)}"
+            start = ", ".join(f"{v:.4g}" for v in args.x0)
+            case = f"{describe(args)}, from x0 = ({start})"
             plotting.plot_states(sim, path=os.path.join(args.plots, "states.png"), case=case)
             plotting.plot_phase_portrait(sim, path=os.path.join(args.plots, "phase.png"), case=case)
             plotting.plot_step_periods(sim, path=os.path.join(args.plots, "periods.png"), case=case)
@@ -139,9 +162,10 @@ def run(args):
         print_json({"result": result, "num_successful": int(sim.num_successful), "steps": steps})
     else:
         print(f"slope {math.degrees(float(model.psi)):g} deg, x0 = {list(args.x0)}")
+        n = model.n_dof
+        heads = [f"q{j + 1}+" for j in range(n)] + [f"dq{j + 1}+" for j in range(n)]
         print(
-            f"{'step':>4} {'period (s)':>11}  {'q1+':>10} {'q2+':>10} {'dq1+':>10} "
-            f"{'dq2+':>10}  result"
+            f"{'step':>4} {'period (s)':>11}  " + " ".join(f"{h:>10}" for h in heads) + "  result"
         )
         for i, s in enumerate(steps, 1):
             x = s["x_plus"] if s["x_plus"] is not None else s["x_minus"]

@@ -238,13 +238,8 @@ def multidomain_step(model, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None)
     return StepResult(x_minus, x_plus, total, impulse, code), info
 
 
-def multidomain_trajectory(model, x0, num_points=50, config=DEFAULT_CONFIG):
-    """Dense trajectory of one cycle, per domain, for plots and invariant checks.
-
-    **Returns:** `(ts, xs, info)`: times (domain-local, shape `(num_domains, num_points)`),
-    states (`(num_domains, num_points, 2n)`) and the `DomainInfo` of the cycle.
-    """
-    _, info = multidomain_step(model, x0, config)
+def _domain_grids(model, info, num_points, config):
+    """States on `num_points` equally spaced times of each domain of a cycle (`info`)."""
     ts_all, xs_all = [], []
     for i in range(model.num_domains):
         dur = info.duration[i]
@@ -259,4 +254,25 @@ def multidomain_trajectory(model, x0, num_points=50, config=DEFAULT_CONFIG):
         )
         ts_all.append(ts)
         xs_all.append(sol.ys)
-    return jnp.stack(ts_all), jnp.stack(xs_all), info
+    return jnp.stack(ts_all), jnp.stack(xs_all)
+
+
+def multidomain_trajectory(model, x0, num_points=50, config=DEFAULT_CONFIG):
+    """Dense trajectory of one cycle, per domain, for plots and invariant checks.
+
+    **Returns:** `(ts, xs, info)`: times (domain-local, shape `(num_domains, num_points)`),
+    states (`(num_domains, num_points, 2n)`) and the `DomainInfo` of the cycle.
+    """
+    _, info = multidomain_step(model, x0, config)
+    ts, xs = _domain_grids(model, info, num_points, config)
+    return ts, xs, info
+
+
+def dense_cycle(model, x0, num_points, config=DEFAULT_CONFIG, alive=True):
+    """One cycle on `num_points` times per domain, joined: times from the start of the
+    cycle (shape `(num_domains * num_points,)`) and states (`(..., 2n)`), as
+    `vhcjax.simulate(..., dense_points=num_points)` returns them for a multi-domain model."""
+    _, info = multidomain_step(model, x0, config, alive)
+    ts, xs = _domain_grids(model, info, num_points, config)
+    starts = jnp.concatenate([jnp.zeros(1, ts.dtype), jnp.cumsum(info.duration)[:-1]])
+    return (ts + starts[:, None]).reshape(-1), xs.reshape(-1, xs.shape[-1])

@@ -35,6 +35,11 @@ def _step_starts(sim, k):
     return np.concatenate([[0.0], np.cumsum(T)])[:k]
 
 
+#: Names of the coordinates in legends, by number of joint angles: the compass gait's
+#: two legs and the kneed walker's stance leg, swing thigh and swing shank.
+_COORDINATE_NAMES = {2: ("stance", "swing"), 3: ("stance", "swing thigh", "swing shank")}
+
+
 def plot_states(sim, axes=None, path=None, case=None):
     """$q$ and $\\dot q$ against time (thesis Fig 7.2): stance-leg angle and velocity in
     one colour, swing leg in another; the lines swap at each impact (relabelling), and the
@@ -53,13 +58,17 @@ def plot_states(sim, axes=None, path=None, case=None):
     else:
         fig = axes[0].figure
     starts = _step_starts(sim, k)
+    n = x.shape[-1] // 2
+    names = _COORDINATE_NAMES.get(n, ("stance",) + ("",) * (n - 1))
     for i in range(k):
         tt = starts[i] + t[i]
-        lab = i == 0
-        axes[0].plot(tt, x[i, :, 0], "C3", label="$q_1$ (stance)" if lab else None)
-        axes[0].plot(tt, x[i, :, 1], "C2", label="$q_2$ (swing)" if lab else None)
-        axes[1].plot(tt, x[i, :, 2], "C3", label="$\\dot q_1$ (stance)" if lab else None)
-        axes[1].plot(tt, x[i, :, 3], "C2", label="$\\dot q_2$ (swing)" if lab else None)
+        for j in range(n):
+            lab = f" ({names[j]})" if names[j] else ""
+            colour = ("C3", "C2", "C0", "C1", "C4")[j % 5]
+            axes[0].plot(tt, x[i, :, j], colour, label=f"$q_{j + 1}${lab}" if i == 0 else None)
+            axes[1].plot(
+                tt, x[i, :, n + j], colour, label=f"$\\dot q_{j + 1}${lab}" if i == 0 else None
+            )
     axes[0].set_ylabel("angle (rad)")
     axes[1].set_ylabel("angular velocity (rad/s)")
     axes[1].set_xlabel("time (s)")
@@ -79,23 +88,26 @@ def plot_phase_portrait(sim, ax=None, path=None, case=None):
     """
     plt = pyplot()
     k, _, x = _completed(sim)
+    n = x.shape[-1] // 2
     if ax is None:
         fig, ax = plt.subplots(figsize=(5.5, 4.5))
     else:
         fig = ax.figure
     for i in range(k):
-        stance = i % 2 == 0  # the leg that is the stance leg in step 0
+        # The leg that is the stance leg in step 0: coordinate 1 while in stance, 2 (its
+        # thigh, for a kneed walker) while swinging; relabelling swaps them at impact.
+        stance = i % 2 == 0
         j = 0 if stance else 1
         ax.plot(
             x[i, :, j],
-            x[i, :, j + 2],
+            x[i, :, j + n],
             "C3" if stance else "C2",
             label=("stance" if stance else "swing") if i < 2 else None,
         )
         if i + 1 < k:  # the impact: a jump in velocity at fixed angle
             ax.plot(
                 [x[i, -1, j], x[i + 1, 0, 1 - j]],
-                [x[i, -1, j + 2], x[i + 1, 0, 3 - j]],
+                [x[i, -1, j + n], x[i + 1, 0, n + 1 - j]],
                 ":",
                 color="0.5",
                 lw=0.8,
@@ -146,9 +158,10 @@ def plot_step_periods(sim, ax=None, path=None, case=None):
 def walker_frames(sim, model):
     """World positions of the walker at every dense time of the completed steps.
 
-    **Returns:** dict with `t` (absolute times), `q` (angles) and 2-D positions
-    `stance_foot`, `hip`, `swing_foot`, `stance_mass`, `swing_mass` (shape `(frames, 2)`),
-    the stance foot moving to the impact point after each step.
+    **Returns:** dict with `t` (absolute times), `q` (angles) and the 2-D positions of
+    every point of `model.points` (compass gait: `stance_foot`, `hip`, `swing_foot`,
+    `stance_mass`, `swing_mass`; shape `(frames, 2)`), the stance foot moving to the
+    impact point after each step.
     """
     import jax
 
@@ -197,6 +210,7 @@ class _WalkerArtists:
         ax.set_yticks([])
         ax.set_xlabel(f"downhill; window 4 l wide (leg length l = {l:g} m)")
         # Footprints so far: the distinct stance-foot positions, in order.
+        self.mass_names = [n for n in frames if n not in _JOINTS + ("t", "q")]
         feet = frames["stance_foot"]
         self.first_index = np.concatenate(
             [[0], np.nonzero(np.any(np.diff(feet, axis=0) != 0, axis=1))[0] + 1]
@@ -204,12 +218,13 @@ class _WalkerArtists:
 
     def update(self, i):
         f, l, psi = self.frames, self.l, self.psi
-        st, hip, sw = f["stance_foot"][i], f["hip"][i], f["swing_foot"][i]
+        hip = f["hip"][i]
         shown = f["stance_foot"][self.first_index[self.first_index <= i]]
         self.prints.set_data(shown[:, 0], shown[:, 1])
-        self.stance.set_data([st[0], hip[0]], [st[1], hip[1]])
-        self.swing.set_data([hip[0], sw[0]], [hip[1], sw[1]])
-        m = np.stack([f["stance_mass"][i], f["swing_mass"][i]])
+        for line, names in ((self.stance, _STANCE_CHAIN), (self.swing, _SWING_CHAIN)):
+            p = np.stack([f[n][i] for n in names if n in f])
+            line.set_data(p[:, 0], p[:, 1])
+        m = np.stack([f[n][i] for n in self.mass_names])
         self.masses.set_data(m[:, 0], m[:, 1])
         self.hip.set_data([hip[0]], [hip[1]])
         q = f["q"][i]
@@ -218,6 +233,18 @@ class _WalkerArtists:
         y0 = -np.tan(psi) * hip_x
         self.ax.set_xlim(hip_x - 2.0 * l, hip_x + 2.0 * l)
         self.ax.set_ylim(y0 - 0.6 * l, y0 + 1.4 * l)
+
+
+#: Points drawn as the legs (a point a model lacks, e.g. a knee, is skipped); every other
+#: point of `model.points` is drawn as a mass.
+_STANCE_CHAIN = ("stance_foot", "stance_knee", "hip")
+_SWING_CHAIN = ("hip", "knee", "swing_foot")
+_JOINTS = _STANCE_CHAIN + _SWING_CHAIN
+
+
+def _leg_length(frames):
+    """Stance foot to hip at the first frame (m): the window scale of the figure."""
+    return float(np.linalg.norm(frames["hip"][0] - frames["stance_foot"][0]))
 
 
 _TEXT = "t = {t:5.2f} s\nq1 = {q1:+.3f} rad\nq2 = {q2:+.3f} rad"
@@ -236,7 +263,7 @@ def plot_walker(sim, model, frame=0, ax=None, path=None):
     else:
         fig = ax.figure
     _WalkerArtists(
-        ax, frames, float(model.psi), float(model.l), _TEXT, type(model).__name__
+        ax, frames, float(model.psi), _leg_length(frames), _TEXT, type(model).__name__
     ).update(frame)
     return _done(fig, path)
 
@@ -266,7 +293,7 @@ def animate(sim, model, path, *, fps=None, max_frames=300):
         fps = max(1.0, min(50.0, len(idx) / max(duration, 1e-9)))
     fig, ax = plt.subplots(figsize=(6, 3.2), dpi=80)
     artists = _WalkerArtists(
-        ax, frames, float(model.psi), float(model.l), _TEXT, type(model).__name__
+        ax, frames, float(model.psi), _leg_length(frames), _TEXT, type(model).__name__
     )
 
     def update(j):
