@@ -1,5 +1,5 @@
 """A batch spread over 4 (forced host) devices gives the same result as one device: the
-generic `batched_map`, batched simulation, the basin classification and the bifurcation
+generic `padded_map`, batched simulation, the basin classification and the bifurcation
 diagram; and a batched gait search on 4 devices finds gaits that the 4-device hybrid
 simulation returns to."""
 
@@ -14,7 +14,7 @@ SCRIPT = textwrap.dedent(
     """
     import jax, jax.numpy as jnp, numpy as np
     import vhcjax as vj
-    from vhcjax._batching import batched_map, default_mesh
+    from vhcjax._batching import default_mesh, padded_map
 
     assert len(jax.devices()) == 4, jax.devices()
 
@@ -33,12 +33,19 @@ SCRIPT = textwrap.dedent(
         sim = vj.simulate(vj.CompassGait(psi=psi), x0, 3, config=vj.FAST_CONFIG)
         return sim.steps.period, sim.steps.x_plus, sim.result._value
 
-    four = batched_map(run, slopes)
-    one = batched_map(run, slopes, mesh=default_mesh(jax.devices()[:1]))
+    run_many = jax.jit(jax.vmap(run))
+    devices_seen = []
+
+    def fn(psis):
+        devices_seen.append(len(psis.sharding.device_set))
+        return run_many(psis)
+
+    four = padded_map(fn, slopes)
+    one = padded_map(fn, slopes, mesh=default_mesh(jax.devices()[:1]))
+    assert devices_seen == [4, 1], devices_seen  # the padded chunk split over 4 devices
     for a, b in zip(four, one):
         same(a, b)
-    sharding = four[0].sharding
-    print("OK", np.asarray(four[0]).shape, type(sharding).__name__)
+    print("OK", np.asarray(four[0]).shape)
 
     # library entry points shard their batches over all local devices by themselves
     from vhcjax.robustness._basin import classify_section_points
@@ -142,3 +149,30 @@ def test_host_workers_one_per_cpu_core_or_as_set(monkeypatch):
         monkeypatch.setenv("VHCJAX_HOST_WORKERS", bad)
         with pytest.raises(ValueError, match="VHCJAX_HOST_WORKERS must be a positive integer"):
             host_workers()
+
+
+def test_padded_map_one_padding_rule():
+    """Chunks of one padded size (a power of two, at most `max_chunk`), padded with copies
+    of their first member and cut back; the results are those of the members alone."""
+    import jax.numpy as jnp
+    import numpy as np
+
+    from vhcjax._batching import padded_map
+
+    sizes, firsts = [], []  # chunks may run at once from host threads: compare sorted
+
+    def fn(x, y):
+        sizes.append(x.shape[0])
+        firsts.append((float(x[0]), float(x[-1])))  # first and last member of the chunk
+        return {"sum": x + y[:, 0], "y": y}
+
+    x = np.arange(300.0)
+    y = np.stack([np.arange(300.0) * 2, np.ones(300)], axis=1)
+    out = padded_map(fn, x, y, max_chunk=128)
+    assert sizes == [128, 128, 128]  # 300 members: three chunks of 128, the last padded
+    assert sorted(firsts) == [(0.0, 127.0), (128.0, 255.0), (256.0, 256.0)]  # padded: copies
+    np.testing.assert_array_equal(np.asarray(out["sum"]), 3 * x)
+    np.testing.assert_array_equal(np.asarray(out["y"]), y)
+    sizes.clear()
+    small = padded_map(fn, jnp.arange(5.0), jnp.ones((5, 2)))
+    assert sizes == [8] and small["sum"].shape == (5,)

@@ -1,11 +1,12 @@
-"""Spreading a batch over several devices (GPUs, CPU devices, hosts) with `jax.sharding`.
+"""Batches: one padding rule, chunks run from host threads, spread over devices.
 
-Batched entry points (sweeps, basins, bifurcation diagrams) call `batched_map(fn, *args)`
-where `fn` maps one batch member to a pytree. It `vmap`s `fn`, pads the batch to a multiple
-of the number of devices, places the inputs with a `NamedSharding` over a 1-D mesh axis
-`"batch"`, and lets XLA's SPMD partitioner split the computation: each device simulates its
-share of the walkers, with no host round trip inside loops. With one device this is plain
-`jit(vmap(fn))`.
+Batched entry points (`simulate_batch`, `family_multipliers`, the sweep tangents, basins)
+call `padded_map(fn, *args)`, where `fn` is a jitted, vmapped computation. The batch is
+cut into chunks of one padded size (a power of two, at most `MAX_DISPATCH`), each placed
+with a `NamedSharding` over a 1-D mesh axis `"batch"` so that XLA's SPMD partitioner
+splits it over the devices, with no host round trip inside loops; on a CPU several chunks
+run at once from host threads (`host_workers`). `find_gaits` pads its batches by the same
+rule (`bucket_size`) and adds its own chunk choice (the chord program).
 
 Several hosts: call `jax.distributed.initialize()` first on each host; `default_mesh()` then
 spans `jax.devices()` (all devices of all hosts) and the same code runs unchanged.
@@ -16,7 +17,6 @@ import contextvars
 import os
 from concurrent.futures import ThreadPoolExecutor
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -34,48 +34,6 @@ def default_mesh(devices=None):
     """A 1-D mesh with axis `"batch"` over `devices` (default: all devices)."""
     devices = jax.devices() if devices is None else devices
     return Mesh(np.asarray(devices), ("batch",))
-
-
-def _pad(x, n_pad):
-    if n_pad == 0:
-        return x
-    # Repeat the last member: a valid input, so padded members cannot fail or slow the batch.
-    return jnp.concatenate([x, jnp.repeat(x[-1:], n_pad, axis=0)], axis=0)
-
-
-def batched_map(fn, *args, mesh=None):
-    """`vmap(fn)(*args)` sharded along the leading axis over `mesh`.
-
-    **Arguments:**
-
-    - `fn`: maps one member (the leaves of `args` without their leading axis) to a pytree.
-    - `args`: pytrees of arrays with a common leading batch axis.
-    - `mesh`: a `jax.sharding.Mesh` with a `"batch"` axis; `None` uses all local devices
-      (and no sharding machinery at all if there is only one).
-
-    **Returns:** the pytree of results with the original batch size.
-    """
-    leaves = jax.tree_util.tree_leaves(args)
-    n = leaves[0].shape[0]
-    mesh = default_mesh() if mesh is None else mesh
-    n_dev = mesh.devices.size
-    n_total = -(-n // n_dev) * n_dev
-    padded = jax.tree_util.tree_map(lambda x: _pad(jnp.asarray(x), n_total - n), args)
-    if n_dev > 1:
-        sharding = NamedSharding(mesh, PartitionSpec("batch"))
-        padded = jax.tree_util.tree_map(lambda x: jax.device_put(x, sharding), padded)
-    out = _vmapped(fn)(*padded)
-    return jax.tree_util.tree_map(lambda x: x[:n], out)
-
-
-_cache = {}
-
-
-def _vmapped(fn):
-    # One compiled program per function object (jit caches per input shape/sharding).
-    if fn not in _cache:
-        _cache[fn] = eqx.filter_jit(jax.vmap(fn))
-    return _cache[fn]
 
 
 def shard_batch(tree, mesh=None):
@@ -195,3 +153,38 @@ def in_chunks(fn, n, chunk, workers=1, stage="batch"):
 
         parts = map_in_order(lambda b: jax.block_until_ready(fn(*b)), bounds, workers, ticks)
     return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
+
+
+def padded_map(fn, *args, max_chunk=MAX_DISPATCH, mesh=None, stage="batch"):
+    """`fn(*args)` for a batch of `n` members (the leading axis of the leaves of `args`),
+    run in chunks of one padded size: the library's one padding rule.
+
+    The size is the smallest power of two that holds the batch (`bucket_size`), at most
+    `max_chunk`, rounded up to a multiple of the device count of `mesh` (default: all
+    local devices), so that batches of nearby sizes share one compiled program (tracing
+    and compiling cost far more than running a few padding members). Each chunk is padded
+    with copies of its first member (a valid input, so padding neither fails nor slows the
+    chunk), split over the devices (`shard_batch`) and run, up to `host_workers` chunks
+    at once (`in_chunks`, which reports each to `report_progress` as `stage`).
+
+    `fn` maps arrays with a leading axis of the chunk size to a pytree of arrays with the
+    same leading axis (typically a jitted `vmap`).
+
+    **Returns:** the results of the `n` members, concatenated along the batch axis.
+    """
+    n = jax.tree_util.tree_leaves(args)[0].shape[0]
+    size = round_to_devices(min(bucket_size(n), max_chunk), mesh)
+
+    def part(i, j):
+        m = j - i
+
+        def pad(a):
+            a = jnp.asarray(a)[i:j]
+            if m == size:
+                return a
+            return jnp.concatenate([a, jnp.repeat(a[:1], size - m, axis=0)])
+
+        out = fn(*shard_batch(jax.tree_util.tree_map(pad, args), mesh))
+        return jax.tree_util.tree_map(lambda x: x[:m], out)
+
+    return in_chunks(part, n, size, host_workers(mesh), stage)

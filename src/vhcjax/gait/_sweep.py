@@ -12,7 +12,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._batching import bucket_size, host_workers, in_chunks
+from .._batching import padded_map
 from .._programs import stored_jit
 from .._results import RESULTS
 from ._continuation import _run_continuation, _tangent, _unknowns, continue_to_model
@@ -142,17 +142,14 @@ def _tangents(model, psis, zs, sign, method):
     r"""$dz^*/d\psi$ at every slope (implicit differentiation, batched like `find_gaits`)."""
     import numpy as np
 
-    n = len(psis)
-    chunk = min(bucket_size(n), 256)
-
-    def part(i, j):
-        m = j - i
-        pad = chunk - m
-        p = np.concatenate([psis[i:j], np.full(pad, psis[i])])
-        z = np.concatenate([zs[i:j], np.repeat(zs[i : i + 1], pad, axis=0)])
-        return _tangents_padded(model, jnp.asarray(p), jnp.asarray(z), sign, method)[:m]
-
-    return np.asarray(in_chunks(part, n, chunk, host_workers(), stage="tangents"))
+    return np.asarray(
+        padded_map(
+            lambda p, z: _tangents_padded(model, p, z, sign, method),
+            np.asarray(psis, float),
+            np.asarray(zs, float),
+            stage="tangents",
+        )
+    )
 
 
 def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_STEP, tangents=True):

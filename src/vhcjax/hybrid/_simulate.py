@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
-from .._batching import host_workers, in_chunks, round_to_devices, shard_batch
+from .._batching import padded_map
 from .._programs import stored_jit
 from .._results import RESULTS
 from ._event_solve import solve_to_event
@@ -407,11 +407,11 @@ def _simulate_many(model, x0, num_steps, config):
 def simulate_batch(model, x0, num_steps, *, config=DEFAULT_CONFIG, mesh=None):
     """Simulate a batch of walkers of one model, spread over all devices.
 
-    The batch is padded to a multiple of the device count and split over the `"batch"`
-    axis of `mesh` (default: all local devices, e.g. several GPUs). On a CPU, where XLA
-    runs one program on one core, the batch is also split into one chunk per core, run
-    concurrently from host threads (`VHCJAX_HOST_WORKERS` sets their number). Results
-    agree with unbatched `simulate` calls to rounding.
+    The batch runs in chunks of up to 256 walkers, padded to a power of two
+    (`_batching.padded_map`) and split over the `"batch"` axis of `mesh` (default: all
+    local devices, e.g. several GPUs). On a CPU, where XLA runs one program on one core,
+    one chunk per core runs at a time from host threads (`VHCJAX_HOST_WORKERS` sets their
+    number). Results agree with unbatched `simulate` calls to rounding.
 
     **Arguments:**
 
@@ -428,15 +428,6 @@ def simulate_batch(model, x0, num_steps, *, config=DEFAULT_CONFIG, mesh=None):
         raise ValueError(
             f"x0 must have shape (batch, {2 * model.n_dof}) with batch >= 1, got {x0.shape}"
         )
-    n = x0.shape[0]
-    workers = min(host_workers(mesh), n)
-    chunk = round_to_devices(-(-n // workers), mesh)  # every chunk the same size: one program
-
-    def run(i, j):
-        part = x0[i:j]
-        if j - i < chunk:
-            part = jnp.concatenate([part, jnp.repeat(part[-1:], chunk - (j - i), axis=0)])
-        sim = _simulate_many(model, shard_batch(part, mesh), num_steps, config)
-        return jax.tree_util.tree_map(lambda a: a[: j - i], sim)
-
-    return in_chunks(run, n, chunk, workers, stage="simulation")
+    return padded_map(
+        lambda x: _simulate_many(model, x, num_steps, config), x0, mesh=mesh, stage="simulation"
+    )

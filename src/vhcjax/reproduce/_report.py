@@ -190,7 +190,7 @@ SIZES: dict[str, dict[str, Any]] = {
     ),
 }
 
-CHUNK = 8  # batch size of find_gaits / family_multipliers calls (one compile each)
+CHUNK = 8  # batch size of the family_multipliers calls (one program for all)
 
 
 # ---------------------------------------------------------------------------------------
@@ -208,17 +208,12 @@ def _model(slope_deg):
 
 
 def _gaits(slopes_deg, guesses, family):
-    """VHC gaits at `slopes_deg` from `guesses` (B, 2), one `find_gaits` call per chunk of
-    `CHUNK` (or one call of the bucket size for longer vectors); numpy pytree."""
+    """VHC gaits at `slopes_deg` from `guesses` (B, 2): one `find_gaits` call (padded to
+    a power of two, so that short vectors share one program); numpy pytree."""
     slopes = np.atleast_1d(np.asarray(slopes_deg, float))
-    n = len(slopes)
-    guesses = np.broadcast_to(np.asarray(guesses, float), (n, 2))
-    pad = (-n) % CHUNK if n < 64 else 0  # same batch shape (8) for all small calls
-    if pad:
-        slopes = np.concatenate([slopes, np.repeat(slopes[:1], pad)])
-        guesses = np.concatenate([guesses, np.repeat(guesses[:1], pad, 0)])
+    guesses = np.broadcast_to(np.asarray(guesses, float), (len(slopes), 2))
     g = find_gaits(CompassGait(), jnp.asarray(guesses), family, psi=jnp.radians(slopes))
-    return jax.tree_util.tree_map(lambda x: np.asarray(x)[:n], g)
+    return jax.tree_util.tree_map(np.asarray, g)
 
 
 def _family(slopes_deg, family, rounds=6):
@@ -251,26 +246,21 @@ def _member(g, i):
 
 def _multipliers(slopes_deg, zs):
     """Transverse and Poincare multipliers (and the hybrid step's period and x_minus) of
-    period-1 gaits, `family_multipliers` in chunks of `CHUNK` (one compile)."""
+    period-1 gaits: `family_multipliers` on chunks of `CHUNK` (one program for all)."""
     slopes = np.atleast_1d(np.asarray(slopes_deg, float))
     zs = np.atleast_2d(np.asarray(zs, float))
-    n = len(slopes)
-    out = {k: [] for k in ("transverse", "poincare", "period", "x_minus", "result")}
-    for s in range(0, n, CHUNK):
-        p = np.radians(slopes[s : s + CHUNK])
-        z = zs[s : s + CHUNK]
-        pad = CHUNK - len(p)
-        if pad:
-            p = np.concatenate([p, np.repeat(p[:1], pad)])
-            z = np.concatenate([z, np.repeat(z[:1], pad, 0)])
-        m = family_multipliers(CompassGait(), jnp.asarray(p), jnp.asarray(z))
-        keep = CHUNK - pad
-        out["transverse"].append(np.asarray(m.transverse)[:keep])
-        out["poincare"].append(np.asarray(m.poincare)[:keep])
-        out["period"].append(np.asarray(m.period)[:keep])
-        out["x_minus"].append(np.asarray(m.x_minus)[:keep])
-        out["result"].append(np.asarray(m.result._value)[:keep])
-    return {k: np.concatenate(v) for k, v in out.items()}
+    parts = [
+        family_multipliers(CompassGait(), np.radians(slopes[s : s + CHUNK]), zs[s : s + CHUNK])
+        for s in range(0, len(slopes), CHUNK)
+    ]
+    m = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *parts)
+    return {
+        "transverse": m.transverse,
+        "poincare": m.poincare,
+        "period": m.period,
+        "x_minus": m.x_minus,
+        "result": m.result._value,
+    }
 
 
 def _sim(model, x0, sizes, dense=True):

@@ -26,14 +26,7 @@ import numpy as np
 import optimistix as optx
 
 from .. import hybrid as _poincare
-from .._batching import (
-    MAX_DISPATCH,
-    bucket_size,
-    host_workers,
-    in_chunks,
-    round_to_devices,
-    shard_batch,
-)
+from .._batching import MAX_DISPATCH, padded_map
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import (
@@ -215,26 +208,15 @@ def _family_multipliers_padded(model, psis, zs, config, transverse):
     )
 
 
-_MAX_CHUNK = MAX_DISPATCH
-
-
-def _bucket(n):
-    """Padded batch size: a power of two up to `_MAX_CHUNK`, then whole chunks."""
-    return bucket_size(n) if n <= _MAX_CHUNK else _MAX_CHUNK * -(-n // _MAX_CHUNK)
-
-
 def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, transverse=True, mesh=None):
     """`gait_multipliers` for many slopes in one batched (`vmap`) call.
 
     `psis` (B,) in rad, `zs` (B, 2n-1) the gaits there. Returns a batched
-    `GaitMultipliers`. The batch is padded (copies of the first member) to a power of two
-    (`_batching.bucket_size`) or a multiple of 256, so that nearby sizes share one compilation:
-    tracing the transverse linearization through diffrax costs far more than running it;
-    batches above 256 run as chunks of 256, one per CPU core at a time
-    (`_sharding.host_workers`).
-    Batches above one member are split over the devices of `mesh` (default: all local
-    devices). A host-side function (concrete inputs; the result's leaves are numpy
-    arrays); under `jit` or a derivative, `vmap` `gait_multipliers` instead.
+    `GaitMultipliers`. The batch runs in padded chunks (`_batching.padded_map`: a power of
+    two up to 256 members, so that nearby sizes share one compilation; one chunk per CPU
+    core at a time), split over the devices of `mesh` (default: all local devices). A
+    host-side function (concrete inputs; the result's leaves are numpy arrays); under
+    `jit` or a derivative, `vmap` `gait_multipliers` instead.
     """
     if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((model, psis, zs))):
         raise TypeError(
@@ -243,24 +225,14 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, transverse=Tru
         )
     psis = np.atleast_1d(np.asarray(psis, float))
     zs = np.asarray(zs, float).reshape(psis.shape[0], -1)
-    n = psis.shape[0]
-    pad = (_bucket(n) if n == 1 else round_to_devices(_bucket(n), mesh)) - n
-    psis = np.concatenate([psis, np.repeat(psis[:1], pad)])
-    zs = np.concatenate([zs, np.repeat(zs[:1], pad, axis=0)])
-    if n > _MAX_CHUNK:  # see `_sharding.MAX_DISPATCH`; every chunk is one full bucket
-        out = in_chunks(
-            lambda i, j: family_multipliers(
-                model, psis[i:j], zs[i:j], config, transverse=transverse, mesh=mesh
-            ),
-            n + pad,
-            _MAX_CHUNK,
-            host_workers(mesh),
-            stage="multipliers",
-        )
-    else:
-        psis, zs = shard_batch((psis, zs), mesh)
-        out = _family_multipliers_padded(model, psis, zs, config, transverse)
-    return jax.tree_util.tree_map(lambda x: np.asarray(x)[:n], jax.device_get(out))
+    out = padded_map(
+        lambda p, z: _family_multipliers_padded(model, p, z, config, transverse),
+        psis,
+        zs,
+        mesh=mesh,
+        stage="multipliers",
+    )
+    return jax.device_get(out)
 
 
 def gait_multipliers(model, z, config=DEFAULT_CONFIG, *, transverse=True):
@@ -629,9 +601,9 @@ def bifurcation_diagram(
 
     The start is the gait plus `perturbation` on $\\dot q_2$, so that unstable period-1
     gaits (past the flip) leave towards the attractor. Default tolerance: `FAST_CONFIG`
-    (rtol = atol = 1e-8). `chunk`: optional batch size (memory). Each chunk is padded to
-    a multiple of the device count and split over the devices of `mesh` (default: all
-    local devices; `vhcjax._batching`).
+    (rtol = atol = 1e-8). `chunk`: largest batch of one call (default 256). The chunks
+    are padded (`_batching.padded_map`), split over the devices of `mesh` (default: all
+    local devices) and run one per CPU core at a time.
     """
     model = CompassGait() if model is None else model
     psis = np.asarray(psis, float)
@@ -643,22 +615,16 @@ def bifurcation_diagram(
         ]
     )
     x0s[:, -1] += perturbation
-    n = len(psis)
-    chunk = n if chunk is None else chunk
-    P, R = [], []
-    for i in range(0, n, chunk):
-        sl = slice(i, min(i + chunk, n))
-        ps, xs = psis[sl], x0s[sl]
-        k = len(ps)
-        pad = round_to_devices(k, mesh) - k
-        ps = np.concatenate([ps, np.repeat(ps[-1:], pad)])
-        xs = np.concatenate([xs, np.repeat(xs[-1:], pad, axis=0)])
-        ps, xs = shard_batch((jnp.asarray(ps), jnp.asarray(xs)), mesh)
-        p, r = _long_runs(model, ps, xs, num_transient + num_record, num_record, config)
-        P.append(np.asarray(p)[:k])
-        R.append(np.asarray(r._value)[:k])
-    periods = np.concatenate(P)
-    codes = np.concatenate(R)
+    steps = num_transient + num_record
+    p, r = padded_map(
+        lambda ps, xs: _long_runs(model, ps, xs, steps, num_record, config),
+        psis,
+        x0s,
+        max_chunk=MAX_DISPATCH if chunk is None else chunk,
+        mesh=mesh,
+        stage="simulation",
+    )
+    periods, codes = np.asarray(p), np.asarray(r._value)
     fell = codes != int(RESULTS.successful._value)
     nd = np.array([-1 if f else detect_period(pp) for pp, f in zip(periods, fell)])
     return BifurcationDiagram(psis, periods, fell, codes, nd)
