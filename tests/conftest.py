@@ -41,3 +41,61 @@ def _release_compiled_code():
     yield
     if _memory_maps() > 30_000:
         vhcjax.clear_caches()
+
+
+#: Test files and notebooks that compile the same programs run in one worker process, so
+#: each program is traced and compiled once; every other file is a group of its own (as
+#: `--dist loadfile`). Groups start longest first, so that no worker idles at the end.
+_GROUPS = {
+    "test_design.py": "design",
+    "test_cli_design.py": "design",
+    "07_design.py": "design",
+    "test_control.py": "control",
+    "test_cli_stabilize.py": "control",
+    "06_stabilization.py": "control",
+    "test_sweep.py": "sweep",
+    "test_cli_gait.py": "sweep",
+    "02_gait_search.py": "sweep",
+    "03_stability.py": "test_stability.py",
+    "04_robustness.py": "test_robustness_push.py",
+    "05_new_model.py": "test_vhc_n.py",
+    "01_quickstart.py": "test_cli_simulate.py",
+}
+_LONGEST_FIRST = (
+    "design",
+    "control",
+    "sweep",
+    "test_stability.py",
+    "test_reproduce.py",
+    "test_kneed_walker.py",
+    "test_robustness_push.py",
+    "test_implicit.py",
+)
+
+
+def _group(nodeid):
+    """The group of a test id: its notebook's or its file's."""
+    path, _, rest = nodeid.partition("::")
+    name = path.rsplit("/", 1)[-1]
+    if name == "test_notebooks.py" and "[" in rest:
+        name = rest[rest.index("[") + 1 : rest.rindex("]")]
+    return _GROUPS.get(name, name)
+
+
+def pytest_collection_modifyitems(config, items):
+    def rank(item):
+        g = _group(item.nodeid)
+        return _LONGEST_FIRST.index(g) if g in _LONGEST_FIRST else len(_LONGEST_FIRST)
+
+    items.sort(key=rank)  # stable: each file keeps its order
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """`--dist loadfile` with the groups above as its units of work."""
+    from xdist.scheduler import LoadScopeScheduling
+
+    class GroupScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid):
+            return _group(nodeid)
+
+    return GroupScheduling(config, log)

@@ -209,27 +209,6 @@ def test_A_equals_finite_differences_of_full_dynamics(gaits, mults, index):
         np.testing.assert_allclose(rates0, 0.0, atol=1e-9)
 
 
-def test_large_batches_run_in_chunks_with_the_same_results(gaits, mults, monkeypatch):
-    """Batches above `_MAX_CHUNK` run as host-side chunks (a 1,024 batch hung in the XLA
-    CPU runtime): with the chunk size set to 4, the 6 slopes (padded to 8) run as 4 + 4,
-    two at once from host threads, each padded to the bucket of 8 (the compiled program of
-    `mults`), and give the unchunked results."""
-    psis, zs, _ = gaits
-    monkeypatch.setattr(S, "_MAX_CHUNK", 4)
-    monkeypatch.setenv("VHCJAX_HOST_WORKERS", "2")
-    chunked = S.family_multipliers(CompassGait(), jnp.asarray(psis), jnp.asarray(zs))
-    assert chunked.transverse.shape == mults.transverse.shape == (6, 3)
-    np.testing.assert_array_equal(
-        np.asarray(chunked.result._value), np.asarray(mults.result._value)
-    )
-    np.testing.assert_allclose(
-        np.asarray(chunked.transverse), np.asarray(mults.transverse), rtol=1e-12, atol=1e-14
-    )
-    np.testing.assert_allclose(
-        np.asarray(chunked.poincare), np.asarray(mults.poincare), rtol=1e-12, atol=1e-14
-    )
-
-
 def test_poincare_only_gives_the_same_verdict(gaits, mults):
     """`transverse=False` computes the Poincare multipliers and the verdict only (the
     transverse fields are `None`, the code says they were not asked for)."""
