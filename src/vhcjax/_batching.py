@@ -129,7 +129,7 @@ def map_in_order(fn, items, workers=1, progress=None):
         return [r for _, r in zip(ticks, results)]
 
 
-def in_chunks(fn, n, chunk, workers=1, stage="batch"):
+def in_chunks(fn, n, chunk, workers=1, stage="batch", progress=None):
     """`fn(i, j)` on the slices `[i, j)` of a batch of `n`, `chunk` at a time, results
     concatenated along the batch axis (a host loop: each call is one dispatch).
 
@@ -137,25 +137,25 @@ def in_chunks(fn, n, chunk, workers=1, stage="batch"):
     where each program runs on one core (see `host_workers`). The chunks are independent,
     so the results are the same as one at a time; JAX traces and compiles a program once
     even when several threads call it first. Finished chunks are reported to
-    `report_progress` as `stage`.
+    `report_progress` as `stage`, or to `progress` (a wrapper of the list of chunks, such
+    as a progress bar, see `map_in_order`) if given.
     """
     bounds = [(i, min(i + chunk, n)) for i in range(0, n, chunk)]
-    if _PROGRESS.get() is None or len(bounds) == 1:
-        parts = map_in_order(lambda b: fn(*b), bounds, workers)
-    else:
 
-        def ticks(items):  # results are collected in order: report each as it arrives
-            for k, b in enumerate(items):
-                if k:
-                    report(stage, k, len(bounds))
-                yield b
-            report(stage, len(bounds), len(bounds))
+    def ticks(items):  # results are collected in order: report each as it arrives
+        for k, b in enumerate(items):
+            if k:
+                report(stage, k, len(bounds))
+            yield b
+        report(stage, len(bounds), len(bounds))
 
-        parts = map_in_order(lambda b: jax.block_until_ready(fn(*b)), bounds, workers, ticks)
+    if progress is None and _PROGRESS.get() is not None and len(bounds) > 1:
+        progress = ticks
+    parts = map_in_order(lambda b: jax.block_until_ready(fn(*b)), bounds, workers, progress)
     return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
 
 
-def padded_map(fn, *args, max_chunk=MAX_DISPATCH, mesh=None, stage="batch"):
+def padded_map(fn, *args, max_chunk=MAX_DISPATCH, mesh=None, stage="batch", progress=None):
     """`fn(*args)` for a batch of `n` members (the leading axis of the leaves of `args`),
     run in chunks of one padded size: the library's one padding rule.
 
@@ -165,7 +165,8 @@ def padded_map(fn, *args, max_chunk=MAX_DISPATCH, mesh=None, stage="batch"):
     and compiling cost far more than running a few padding members). Each chunk is padded
     with copies of its first member (a valid input, so padding neither fails nor slows the
     chunk), split over the devices (`shard_batch`) and run, up to `host_workers` chunks
-    at once (`in_chunks`, which reports each to `report_progress` as `stage`).
+    at once (`in_chunks`, which reports each to `report_progress` as `stage`, or to
+    `progress`).
 
     `fn` maps arrays with a leading axis of the chunk size to a pytree of arrays with the
     same leading axis (typically a jitted `vmap`).
@@ -187,4 +188,4 @@ def padded_map(fn, *args, max_chunk=MAX_DISPATCH, mesh=None, stage="batch"):
         out = fn(*shard_batch(jax.tree_util.tree_map(pad, args), mesh))
         return jax.tree_util.tree_map(lambda x: x[:m], out)
 
-    return in_chunks(part, n, size, host_workers(mesh), stage)
+    return in_chunks(part, n, size, host_workers(mesh), stage, progress)

@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import host_workers, map_in_order, round_to_devices, shard_batch
+from .._batching import padded_map
 from .._programs import stored_jit
 from ..hybrid import FAST_CONFIG
 from ._bisection import bisect_threshold
@@ -46,42 +46,34 @@ def classify_section_points(
     progress=None,
     mesh=None,
 ):
-    """Classify section points `z` (shape `(N, 2n-1)`) by their fate (host loop over
-    chunks; on a CPU one chunk per core at a time, see `_sharding.host_workers`).
+    """Classify section points `z` (shape `(N, 2n-1)`) by their fate.
 
-    Each chunk is split over the devices of `mesh` (default: all local devices; see
-    `vhcjax._batching`), so the same call uses every GPU of a machine (or of several hosts
-    after `jax.distributed.initialize()`); `chunk` is rounded up to a multiple of the
-    device count.
+    The points run in chunks of at most `chunk` (`_batching.padded_map`: padded to a
+    power of two and a multiple of the device count, split over the devices of `mesh`,
+    default all local devices, so the same call uses every GPU of a machine, or of several
+    hosts after `jax.distributed.initialize()`; on a CPU one chunk per core at a time).
+    `progress` optionally wraps the list of chunks (a progress bar).
 
     **Returns:** dict of numpy arrays: `label`, `steps`, `period`, `result` (integer
     `RESULTS` codes), `z_final`.
     """
-    z = np.asarray(z, dtype=float)
-    n = z.shape[0]
-    chunk = round_to_devices(chunk, mesh)
-
-    def run(s):
-        part = z[s : s + chunk]
-        pad = chunk - part.shape[0]
-        if pad:
-            part = np.concatenate([part, np.repeat(np.asarray(z_star)[None], pad, 0)])
-        rec = _recover_chunk(
-            model, shard_batch(jnp.asarray(part), mesh), jnp.asarray(z_star), num_steps, tol, config
-        )
-        keep = chunk - pad
-        zf = jax.vmap(model.state_to_section)(rec.x_final)
-        return {
-            "label": np.asarray(rec.label)[:keep],
-            "steps": np.asarray(rec.steps)[:keep],
-            "period": np.asarray(rec.period)[:keep],
-            "result": np.asarray(rec.result._value)[:keep],
-            "z_final": np.asarray(zf)[:keep],
-        }
-
-    # On a CPU, one chunk per core at a time (XLA runs a program on one core); in order.
-    parts = map_in_order(run, range(0, n, chunk), host_workers(mesh), progress)
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    z_star = jnp.asarray(z_star, float)
+    rec = padded_map(
+        lambda part: _recover_chunk(model, part, z_star, num_steps, tol, config),
+        np.asarray(z, dtype=float),
+        max_chunk=chunk,
+        mesh=mesh,
+        stage="basin",
+        progress=progress,
+    )
+    rec = jax.device_get(rec)
+    return {
+        "label": np.asarray(rec.label),
+        "steps": np.asarray(rec.steps),
+        "period": np.asarray(rec.period),
+        "result": np.asarray(rec.result._value),
+        "z_final": np.asarray(jax.vmap(model.state_to_section)(jnp.asarray(rec.x_final))),
+    }
 
 
 class BasinSlice(eqx.Module):
