@@ -90,6 +90,7 @@ def pytest_collection_modifyitems(config, items):
     items.sort(key=rank)  # stable: each file keeps its order
 
 
+@pytest.hookimpl(optionalhook=True)  # a hook of pytest-xdist: absent without it
 def pytest_xdist_make_scheduler(config, log):
     """`--dist loadfile` with the groups above as its units of work."""
     from xdist.scheduler import LoadScopeScheduling
