@@ -72,6 +72,7 @@ def main(argv=None):
 
     if args.trig == "plain":  # the same model, traced with plain jnp.sin/jnp.cos
         vj.trig.sin_cos = lambda x: (jnp.sin(x), jnp.cos(x))
+        os.environ["VHCJAX_PROGRAMS"] = "off"  # never a stored program of the library's
 
     psi = math.radians(3.0)
     rng = np.random.default_rng(0)

@@ -92,7 +92,10 @@ def pytest_collection_modifyitems(config, items):
 
 @pytest.hookimpl(optionalhook=True)  # a hook of pytest-xdist: absent without it
 def pytest_xdist_make_scheduler(config, log):
-    """`--dist loadfile` with the groups above as its units of work."""
+    """`--dist loadfile` with the groups above as its units of work (another `--dist`
+    keeps xdist's own scheduler)."""
+    if config.getvalue("dist") != "loadfile":
+        return None
     from xdist.scheduler import LoadScopeScheduling
 
     class GroupScheduling(LoadScopeScheduling):

@@ -180,6 +180,13 @@ def test_dense_simulation_joins_the_domains(kw, gait):
     np.testing.assert_allclose(x[:, 39, :3], x[:, 40, :3], atol=1e-12)  # knee strike
     assert np.all(np.diff(t, axis=1) >= 0)
     assert np.all(np.abs(x[:, 39, 3:] - x[:, 40, 3:]).max(axis=1) > 1e-3)
+    # a walker that falls in its first step: after the fall the points hold the last
+    # state reached (the angles never jump back to the start)
+    fall = simulate_jit(kw, gait.x0 * jnp.array([1, 1, 1, 3, 3, 3]), 3, dense_points=40)
+    assert fall.result != RESULTS.successful and int(fall.num_successful) == 0
+    assert fall.dense_x is not None
+    q = np.asarray(fall.dense_x[0, :, :3])
+    assert np.abs(np.diff(q, axis=0)).max() < 0.2
 
 
 # ---- the command line with --model kneed ------------------------------------------------

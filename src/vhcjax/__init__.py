@@ -10,7 +10,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
-from . import trig as trig  # vectorizable sin/cos for model kinematics
+from . import trig as trig  # sin/cos computed once per evaluation, for model kinematics
 from ._batching import report_progress as report_progress
 from ._cache import (
     clear_caches as clear_caches,

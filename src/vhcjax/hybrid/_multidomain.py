@@ -239,7 +239,8 @@ def multidomain_step(model, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None)
 
 
 def _domain_grids(model, info, num_points, config):
-    """States on `num_points` equally spaced times of each domain of a cycle (`info`)."""
+    """States on `num_points` equally spaced times of each domain of a cycle (`info`); a
+    domain not reached (the cycle failed before it) holds the last state reached."""
     ts_all, xs_all = [], []
     for i in range(model.num_domains):
         dur = info.duration[i]
@@ -252,8 +253,13 @@ def _domain_grids(model, info, num_points, config):
             saveat=diffrax.SaveAt(ts=ts),
             event=False,
         )
+        ys = sol.ys
+        assert ys is not None  # saved at `ts`
+        if i:  # reached only if every earlier domain succeeded
+            reached = info.result._value[i - 1] == RESULTS.successful._value
+            ys = jnp.where(reached, ys, xs_all[-1][-1])
         ts_all.append(ts)
-        xs_all.append(sol.ys)
+        xs_all.append(ys)
     return jnp.stack(ts_all), jnp.stack(xs_all)
 
 

@@ -6,8 +6,8 @@ Perturbations are taken in section coordinates (compass gait: $z = (q_1, \\dot q
 \\dot q_2)$ with $q_2 = -q_1 - 2\\psi$), so every initial state is a genuine post-impact
 state on the impact surface. Each point is simulated step by step
 (`vhcjax.robustness.recover`) and labelled converged (with steps to converge), fell (with
-the failure code), other cycle or undecided. Batches run in fixed-size chunks (one
-compilation, bounded memory, and a chunk stops as soon as all its members are decided).
+the failure code), other cycle or undecided. Batches run in chunks of at most `chunk`
+points (bounded memory; a chunk stops as soon as all its members are decided).
 """
 
 import math
@@ -30,8 +30,16 @@ BASIN_CONFIG = FAST_CONFIG
 
 @stored_jit
 def _recover_chunk(model, z, z_star, num_steps, tol, config):
+    """The fate of each point: the summary only (not the per-step distances)."""
     x0 = jax.vmap(model.section_to_state)(z)
-    return recover(model, x0, model.section_to_state(z_star), num_steps, tol=tol, config=config)
+    rec = recover(model, x0, model.section_to_state(z_star), num_steps, tol=tol, config=config)
+    return {
+        "label": rec.label,
+        "steps": rec.steps,
+        "period": rec.period,
+        "result": rec.result._value,
+        "z_final": jax.vmap(model.state_to_section)(rec.x_final),
+    }
 
 
 def classify_section_points(
@@ -66,14 +74,7 @@ def classify_section_points(
         stage="basin",
         progress=progress,
     )
-    rec = jax.device_get(rec)
-    return {
-        "label": np.asarray(rec.label),
-        "steps": np.asarray(rec.steps),
-        "period": np.asarray(rec.period),
-        "result": np.asarray(rec.result._value),
-        "z_final": np.asarray(jax.vmap(model.state_to_section)(jnp.asarray(rec.x_final))),
-    }
+    return {k: np.asarray(v) for k, v in jax.device_get(rec).items()}
 
 
 class BasinSlice(eqx.Module):
@@ -221,7 +222,7 @@ def max_converging_perturbation(
     def survives(r):
         z = z_star[None] + r[:, None] * d
         rec = _recover_chunk(model, z, z_star, num_steps, tol, config)
-        return rec.label == CONVERGED
+        return rec["label"] == CONVERGED
 
     return bisect_threshold(
         survives,

@@ -26,7 +26,7 @@ import numpy as np
 import optimistix as optx
 
 from .. import hybrid as _poincare
-from .._batching import MAX_DISPATCH, padded_map
+from .._batching import host_workers, padded_map
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import (
@@ -601,9 +601,10 @@ def bifurcation_diagram(
 
     The start is the gait plus `perturbation` on $\\dot q_2$, so that unstable period-1
     gaits (past the flip) leave towards the attractor. Default tolerance: `FAST_CONFIG`
-    (rtol = atol = 1e-8). `chunk`: largest batch of one call (default 256). The chunks
-    are padded (`_batching.padded_map`), split over the devices of `mesh` (default: all
-    local devices) and run one per CPU core at a time.
+    (rtol = atol = 1e-8). `chunk`: largest batch of one call (default: the batch split
+    into one chunk per CPU core, or whole on a GPU). The chunks are padded
+    (`_batching.padded_map`) and split over the devices of `mesh` (default: all local
+    devices).
     """
     model = CompassGait() if model is None else model
     psis = np.asarray(psis, float)
@@ -620,7 +621,7 @@ def bifurcation_diagram(
         lambda ps, xs: _long_runs(model, ps, xs, steps, num_record, config),
         psis,
         x0s,
-        max_chunk=MAX_DISPATCH if chunk is None else chunk,
+        max_chunk=-(-len(psis) // host_workers(mesh)) if chunk is None else chunk,
         mesh=mesh,
         stage="simulation",
     )
