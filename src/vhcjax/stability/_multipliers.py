@@ -26,7 +26,7 @@ import numpy as np
 import optimistix as optx
 
 from .. import hybrid as _poincare
-from .._batching import host_workers, padded_map
+from .._batching import MAX_DISPATCH, host_workers, padded_map
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import (
@@ -601,8 +601,8 @@ def bifurcation_diagram(
 
     The start is the gait plus `perturbation` on $\\dot q_2$, so that unstable period-1
     gaits (past the flip) leave towards the attractor. Default tolerance: `FAST_CONFIG`
-    (rtol = atol = 1e-8). `chunk`: largest batch of one call (default: the batch split
-    into one chunk per CPU core, or whole on a GPU). The chunks are padded
+    (rtol = atol = 1e-8). `chunk`: largest batch of one call (default: 256 when the
+    chunks run one per CPU core at a time, else the whole batch). The chunks are padded
     (`_batching.padded_map`) and split over the devices of `mesh` (default: all local
     devices).
     """
@@ -621,7 +621,8 @@ def bifurcation_diagram(
         lambda ps, xs: _long_runs(model, ps, xs, steps, num_record, config),
         psis,
         x0s,
-        max_chunk=-(-len(psis) // host_workers(mesh)) if chunk is None else chunk,
+        # chunks of up to 256 run one per CPU core; a GPU takes the whole batch at once
+        max_chunk=chunk or (MAX_DISPATCH if host_workers(mesh) > 1 else len(psis)),
         mesh=mesh,
         stage="simulation",
     )
