@@ -80,32 +80,6 @@ def recover(
 
     **Returns:** a `Recovery`.
     """
-    return _recover(
-        model,
-        x0,
-        x_star,
-        num_steps,
-        tol,
-        cycle_tol,
-        max_period,
-        config,
-        first_step,
-        stop_when_converged,
-    )
-
-
-def _recover(
-    model,
-    x0,
-    x_star,
-    num_steps,
-    tol,
-    cycle_tol,
-    max_period,
-    config,
-    first_step,
-    stop_when_converged,
-):
     x0 = jnp.asarray(x0, dtype=float)
     x_star = jnp.asarray(x_star, dtype=float)
     B = x0.shape[0]
