@@ -214,3 +214,33 @@ def test_period_four_gait_at_five_degrees():
     )
     np.testing.assert_allclose(m5.state_to_section(sim.steps.x_plus[-1]), o.z, atol=1e-9)
     assert len(np.unique(np.round(np.asarray(sim.steps.period), 4))) == 4
+
+
+def test_period1_family_is_the_poincare_fixed_point_at_every_slope(gaits3):
+    """The family over slopes (the slope sweep, shooting) against an independent Newton
+    solve of P(z) = z (optimistix) at each slope, and the 3-degree gaits of `gaits3`; a
+    model far from Table 1 (mH = 1 kg) is found too."""
+    _, ref = gaits3
+    for family in ("stable", "unstable"):
+        psis = np.radians([2.0, 3.0, 4.0])
+        fam = vhcjax.period1_family(psis, family)
+        assert vhcjax.result_names(fam.result) == ["successful"] * 3
+        np.testing.assert_allclose(np.asarray(fam.z)[1], ref[family][0], atol=1e-10)
+        for p, z, T in zip(psis, np.asarray(fam.z), np.asarray(fam.periods)):
+            fp = S._fixed_point_jit(
+                S.with_slope(CompassGait(), p),
+                jnp.asarray(z) + 1e-4,
+                1,
+                config=vhcjax.DEFAULT_CONFIG,
+            )
+            assert fp.result == vhcjax.RESULTS.successful
+            np.testing.assert_allclose(np.asarray(fp.z), z, atol=1e-10)
+            assert abs(float(fp.periods[0]) - T) < 1e-10
+    light = CompassGait(mH=1.0)
+    fam = vhcjax.period1_family(np.radians([3.5, 4.5]), "stable", model=light)
+    assert vhcjax.result_names(fam.result) == ["successful"] * 2
+    for p, z in zip(np.radians([3.5, 4.5]), np.asarray(fam.z)):
+        out = vhcjax.step_map(S.with_slope(light, p), jnp.asarray(z))
+        assert float(jnp.max(jnp.abs(out.z_next - z))) < 1e-10
+    with pytest.raises(TypeError, match="compass-gait"):
+        vhcjax.period1_family([PSI3], model=vhcjax.KneedWalker())

@@ -32,7 +32,6 @@ from .._results import RESULTS
 from ..hybrid import (
     DEFAULT_CONFIG,
     FAST_CONFIG,
-    fixed_point,
     flow,
     ode_solver,
     simulate,
@@ -349,11 +348,6 @@ def midswing_multipliers(model, z, config=DEFAULT_CONFIG):
 _fixed_point_jit = _poincare.fixed_point_jit
 
 
-@stored_jit
-def _fixed_points_batch(model, psis, z0s, k=1, config=DEFAULT_CONFIG):
-    return jax.vmap(lambda p, z: fixed_point(with_slope(model, p), z, k, config=config))(psis, z0s)
-
-
 class Family(eqx.Module):
     """Period-1 gaits along a slope range: `psi` (rad), `z` (B, 2n-1), `periods` (B,),
     `result` (per slope)."""
@@ -369,52 +363,48 @@ def period1_family(
     family="stable",
     *,
     model=None,
-    seed=None,
-    seed_psi=math.radians(3.0),
+    method="shooting",
     coarse_step=math.radians(0.1),
-    config=DEFAULT_CONFIG,
+    seed=None,
+    seed_psi=None,
+    config=None,
 ):
-    """Period-1 gaits at the slopes `psis` (rad), continued from a seed.
+    """Period-1 gaits of a compass-gait model at the slopes `psis` (rad).
 
-    A sequential continuation with a secant predictor on a coarse slope grid (step
-    `coarse_step`) from `seed` at `seed_psi` (default: the 3-degree gait of `family`)
-    provides initial guesses; then one batched (`vmap`) Newton solve at all `psis`.
-    Not jittable as a whole (host loop over the coarse grid); each solve is.
+    The slope sweep of the gait search (`vhcjax.sweep`): the gait at 3 degrees by homotopy
+    from the reference model, a continuation over anchor slopes at most `coarse_step`
+    apart, then one batched Newton solve at every slope, missed slopes retried from
+    their neighbours. `method="shooting"` (default) solves for the fixed point of the
+    Poincare map (thesis Problem 2); `"vhc"` solves thesis Problem 1 (faster, but it
+    ends where the phi'' ODE becomes singular).
+
+    `seed`, `seed_psi` and `config` are accepted for old calls and ignored (a warning):
+    the sweep needs no seed and solves every gait to 1e-12.
+
+    **Returns:** a `Family`; `z` holds the section coordinates $(q_1, \\dot q_1,
+    \\dot q_2)$ after impact, `periods` the step periods, `result` the code per slope.
     """
+    import warnings
+
+    from ..gait import sweep
+
     model = CompassGait() if model is None else model
-    psis = np.atleast_1d(np.asarray(psis, float))
-    z_seed = np.asarray(SEEDS_3DEG[family] if seed is None else seed, float)
-    lo, hi = min(psis.min(), seed_psi), max(psis.max(), seed_psi)
-    grid_up = np.arange(seed_psi, hi + coarse_step, coarse_step)
-    grid_dn = np.arange(seed_psi, lo - coarse_step, -coarse_step)
-    known = {}
-    for grid in (grid_up, grid_dn):
-        zs = []
-        for p in grid:
-            guess = z_seed if len(zs) == 0 else (zs[-1] if len(zs) == 1 else 2 * zs[-1] - zs[-2])
-            fp = _fixed_point_jit(with_slope(model, p), jnp.asarray(guess), 1, config=config)
-            if fp.result != RESULTS.successful:
-                break
-            zs.append(np.asarray(fp.z))
-            known[float(p)] = zs[-1]
-    if not known:  # no gait at the seed (e.g. another model): every slope fails, cleanly
-        n = len(psis)
-        return Family(
-            jnp.asarray(psis),
-            jnp.broadcast_to(jnp.asarray(z_seed), (n, len(z_seed))),
-            jnp.zeros(n),
-            jax.vmap(lambda _: RESULTS.not_converged)(jnp.arange(n)),
+    if not isinstance(model, CompassGait):
+        raise TypeError(
+            "period1_family follows compass-gait families; for another model solve each "
+            "slope with vhcjax.fixed_point (it works under jax.vmap)"
         )
-    ps = np.array(sorted(known))
-    Z = np.stack([known[p] for p in ps])
-    guesses = np.stack([np.interp(psis, ps, Z[:, j]) for j in range(Z.shape[1])], axis=1)
-    fps = _fixed_points_batch(model, jnp.asarray(psis), jnp.asarray(guesses), 1, config)
-    # Outside the continued range the guess is an extrapolation: flag as not converged.
-    inside = (psis >= ps.min() - 1e-12) & (psis <= ps.max() + 1e-12)
-    code = jax.vmap(lambda i, r: RESULTS.where(i, r, RESULTS.not_converged))(
-        jnp.asarray(inside), fps.result
-    )
-    return Family(jnp.asarray(psis), fps.z, fps.periods[:, 0], code)
+    ignored = [k for k, v in (("seed", seed), ("seed_psi", seed_psi), ("config", config)) if v]
+    if ignored:
+        warnings.warn(
+            f"period1_family: {', '.join(ignored)} ignored (the sweep needs no seed)",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+    psis = np.atleast_1d(np.asarray(psis, float))
+    sw = sweep(model, psis, family, method, anchor_step=coarse_step, tangents=False)
+    g = sw.gaits
+    return Family(sw.psi, g.z, g.T, g.result)
 
 
 # ---- period doubling --------------------------------------------------------------------
