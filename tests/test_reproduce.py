@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from vhcjax.cli import main
-from vhcjax.reproduce import _report as R
+from vhcjax.reproduce import N_SECTIONS, _report as R, _run, reproduce
 
 
 # ---- the verdict rule (no computation) ---------------------------------------------------
@@ -47,6 +47,26 @@ def test_thesis_table_parses():
         assert (s["q1"], s["q2"], s["dq1"], s["dq2"]) == (t["a"], t["e"], t["b"], t["f"])
 
 
+def test_interrupted_run_leaves_the_folder_as_it_was(tmp_path, monkeypatch):
+    """A run stopped in a section (Ctrl-C) writes no figure and no report into the
+    folder, and leaves the report of an earlier run whole."""
+    (tmp_path / "report.md").write_text("earlier report")
+
+    def draws(run, sec):
+        with open(f"{run.out_dir}/fig.png", "wb") as f:
+            f.write(b"png")
+        sec.figures.append("fig.png")
+
+    def stopped(run, sec):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(_run, "SECTIONS", [("a", "draws", draws), ("b", "stopped", stopped)])
+    with pytest.raises(KeyboardInterrupt):
+        reproduce(str(tmp_path))
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["report.md"]
+    assert (tmp_path / "report.md").read_text() == "earlier report"
+
+
 # ---- the command (quick mode) ------------------------------------------------------------
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory):
@@ -67,7 +87,7 @@ def _row(res, section, quantity_prefix):
 def test_report_sections_and_figures(quick_run):
     out, res, report = quick_run
     assert res["mode"] == "quick"
-    assert len(res["sections"]) == R.N_SECTIONS
+    assert len(res["sections"]) == N_SECTIONS
     for key, sec in res["sections"].items():
         assert f"## {sec['title']}" in report, key
         assert sec["rows"], key
