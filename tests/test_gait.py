@@ -271,10 +271,9 @@ def test_chord_steps_keep_the_jacobian():
 @pytest.mark.parametrize("workers", ["1", "2"])
 def test_large_batches_run_in_chunks_with_the_same_results(monkeypatch, workers):
     """Batches above `_MAX_CHUNK` run as host-side chunks (a 1,024 batch hung in the XLA
-    CPU runtime): with the chunk size set to 2, five members run as 2 + 2 + 1, each padded
-    to 2 and then to the bucket of 8 (one compiled program), one chunk at a time or two at
-    once from host threads, and give the unchunked results and codes (the vectorised
-    Newton loop)."""
+    CPU runtime): with the chunk size set to 2, five members run as 2 + 2 + 1, the last
+    padded to 2 (one compiled program), one chunk at a time or two at once from host
+    threads, and give the unchunked results and codes (the vectorised Newton loop)."""
     m = vj.CompassGait()
     guesses = jnp.array([[0.20, -1.0], [0.20, -1.0], [2.5, 8.0], [0.2, 0.0], [0.20, -1.0]])
     psi = jnp.radians(jnp.array([3.0, 2.0, 3.0, 4.0, 2.5]))

@@ -234,6 +234,8 @@ def test_cli_gait_and_multipliers(capsys, kw, gait):
         ["multipliers", "--model", "kneed"],
         ["gait", "--model", "kneed", "--method", "shooting", "--a", "0.4"],
         ["basin", "--mass-shank", "0.1"],
+        ["gait", "--model", "kneed", "--method", "shooting", "--family", "stable"],
+        ["multipliers", "--model", "kneed", "--method", "shooting", "--family", "unstable"],
     ):
         assert main(argv) == 2
         assert len(capsys.readouterr().err.strip().splitlines()) == 1

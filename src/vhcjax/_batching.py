@@ -6,7 +6,7 @@ cut into chunks of one padded size (a power of two, at most `MAX_DISPATCH`), eac
 with a `NamedSharding` over a 1-D mesh axis `"batch"` so that XLA's SPMD partitioner
 splits it over the devices, with no host round trip inside loops; on a CPU several chunks
 run at once from host threads (`host_workers`). `find_gaits` pads its batches by the same
-rule (`bucket_size`) and adds its own chunk choice (the chord program).
+rule, with a chunk size of its own (`max_chunk`).
 
 Several hosts: call `jax.distributed.initialize()` first on each host; `default_mesh()` then
 spans `jax.devices()` (all devices of all hosts) and the same code runs unchanged.
@@ -155,6 +155,12 @@ def in_chunks(fn, n, chunk, workers=1, stage="batch", progress=None):
     return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
 
 
+def dispatch_size(n, max_chunk=MAX_DISPATCH, mesh=None):
+    """Members per dispatch of `padded_map` for a batch of `n`: `bucket_size(n)`, at most
+    `max_chunk`, rounded up to a multiple of the device count of `mesh`."""
+    return round_to_devices(min(bucket_size(n), max_chunk), mesh)
+
+
 def padded_map(fn, *args, max_chunk=MAX_DISPATCH, mesh=None, stage="batch", progress=None):
     """`fn(*args)` for a batch of `n` members (the leading axis of the leaves of `args`),
     run in chunks of one padded size: the library's one padding rule.
@@ -174,7 +180,7 @@ def padded_map(fn, *args, max_chunk=MAX_DISPATCH, mesh=None, stage="batch", prog
     **Returns:** the results of the `n` members, concatenated along the batch axis.
     """
     n = jax.tree_util.tree_leaves(args)[0].shape[0]
-    size = round_to_devices(min(bucket_size(n), max_chunk), mesh)
+    size = dispatch_size(n, max_chunk, mesh)
 
     def part(i, j):
         m = j - i

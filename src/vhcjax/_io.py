@@ -3,8 +3,10 @@ target, rename at the end (`os.replace` is atomic on one file system)."""
 
 import contextlib
 import os
+import shutil
+import tempfile
 
-#: Temporary files being written now; removed by `remove_pending` (the command line calls
+#: Temporary files (and folders) being written now; removed by `remove_pending` (the command line calls
 #: it when interrupted, so that no partial file is left behind).
 PENDING: set[str] = set()
 
@@ -26,6 +28,20 @@ def atomic_open(path, mode="w", **kwargs):
             os.remove(tmp)
 
 
+@contextlib.contextmanager
+def pending_folder(parent, prefix=".partial-"):
+    """A new hidden folder in `parent` for files that are not complete yet (the caller
+    moves them out when they are); removed with what is left in it when the block ends,
+    or by `remove_pending` after an interrupt."""
+    folder = tempfile.mkdtemp(prefix=prefix, dir=parent)
+    PENDING.add(folder)
+    try:
+        yield folder
+    finally:
+        PENDING.discard(folder)
+        shutil.rmtree(folder, ignore_errors=True)
+
+
 def save_figure(fig, path, **kwargs):
     """`fig.savefig` through `atomic_open` (the format from the suffix of `path`)."""
     fmt = os.path.splitext(path)[1].lstrip(".") or None
@@ -34,8 +50,11 @@ def save_figure(fig, path, **kwargs):
 
 
 def remove_pending():
-    """Remove every partial file still being written (after an interrupt)."""
+    """Remove every partial file and folder still being written (after an interrupt)."""
     for tmp in list(PENDING):
+        if os.path.isdir(tmp):
+            shutil.rmtree(tmp, ignore_errors=True)
+            continue
         try:
             os.remove(tmp)
         except OSError:

@@ -71,7 +71,12 @@ def register(subparsers):
     )
     add_model_flags(q)
     add_model_choice(q)
-    q.add_argument("--family", choices=["stable", "unstable"], default="stable")
+    q.add_argument(
+        "--family",
+        choices=["stable", "unstable"],
+        default=None,  # set by walker_from_args (a compass-gait flag)
+        help="gait family (default stable)",
+    )
     q.add_argument(
         "--method",
         choices=["vhc", "shooting"],

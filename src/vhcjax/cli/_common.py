@@ -209,7 +209,11 @@ def walker_from_args(args, slope_deg=None):
         for dest, flag, default in _COMPASS_ONLY:
             if getattr(args, dest) != default:
                 raise CLIError(f"{flag} is a compass-gait parameter: not with --model kneed")
+        if getattr(args, "family", None) is not None:
+            raise CLIError("--family is a compass-gait flag: the kneed walker has one family")
         return kneed_from_args(args, slope)
+    if hasattr(args, "family") and args.family is None:
+        args.family = "stable"
     for dest, flag, _, _ in KNEED_FLAGS:
         if getattr(args, dest, None) is not None:
             raise CLIError(f"{flag} is a kneed-walker parameter: add --model kneed")

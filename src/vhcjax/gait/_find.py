@@ -6,7 +6,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-from .._batching import bucket_size, device_multiple, host_workers, in_chunks, shard_batch
+from .._batching import bucket_size, device_multiple, dispatch_size, host_workers, padded_map
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..solvers import detach
@@ -66,14 +66,6 @@ _MIN_SPLIT = 8
 
 
 _search_one_jit = stored_jit(_search)
-
-
-def _padded_size(B, mesh):
-    """Batch size after padding: a bucket per device, times the device count."""
-    if B == 1:
-        return 1
-    k = device_multiple(mesh)
-    return bucket_size(-(-B // k)) * k
 
 
 def _chunk_size(B, workers, mesh):
@@ -186,39 +178,27 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord):
     if not sizes:
         raise ValueError("find_gaits needs a batch: guesses, psi or batched model parameters")
     B = max(sizes)
-    workers = host_workers(mesh)
-    chunk = _chunk_size(B, workers, mesh)
-    if chord is None:  # members per device of one dispatch (every chunk: one program)
-        chord = _padded_size(min(B, chunk), mesh) // device_multiple(mesh) >= _CHORD_MIN_MEMBERS
     sign = family_sign(family)
-    if B <= chunk:
-        gaits = _find_chunk(
-            model, guesses, B, _padded_size(B, mesh), sign, method, solver, mesh, chord
-        )
+    if B == 1 and guesses is not None:  # one member: no batching to trace or run
+        gaits = _search_single(model, guesses, sign, method, solver, bool(chord))
         return _clean_failed(_relabel(gaits, family), guesses, B)
-
-    def part(x, i, j):
-        if eqx.is_array(x) and jnp.ndim(x) > 0:
-            return jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])[i:j]
-        return x
-
-    gaits = in_chunks(
-        lambda i, j: _find_chunk(
-            jax.tree_util.tree_map(lambda x: part(x, i, j), model),
-            None if guesses is None else part(guesses, i, j),
-            j - i,
-            chunk,
-            sign,
-            method,
-            solver,
-            mesh,
-            chord,
-        ),
-        B,
-        chunk,
-        workers,
-        stage="gait search",
+    chunk = _chunk_size(B, host_workers(mesh), mesh)
+    if chord is None:  # members per device of one dispatch (every chunk: one program)
+        chord = dispatch_size(B, chunk, mesh) // device_multiple(mesh) >= _CHORD_MIN_MEMBERS
+    # the batched parameters, each with B rows; the rest is shared by every member
+    batched, shared = eqx.partition(model, lambda x: eqx.is_array(x) and jnp.ndim(x) > 0)
+    batched = jax.tree_util.tree_map(
+        lambda x: jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:]), batched
     )
+
+    def search(params, g):
+        m = eqx.combine(params, shared)
+        axes = _batched_axes(m)
+        if g is None:
+            return _from_reference_batch(m, sign, method, _HOMOTOPY_STEPS, axes)
+        return _search_batch(m, g, sign, method, solver, axes, bool(chord))
+
+    gaits = padded_map(search, batched, guesses, max_chunk=chunk, mesh=mesh, stage="gait search")
     return _clean_failed(_relabel(gaits, family), guesses, B)
 
 
@@ -246,25 +226,3 @@ def _clean_failed(gaits, guesses, B=None):
         return jnp.where(f & ~jnp.isfinite(x), 0.0, x)
 
     return jax.tree_util.tree_map(clean, gaits)
-
-
-def _find_chunk(model, guesses, B, P, sign, method, solver, mesh, chord):
-    """`find_gaits` on one dispatch of `B` members: pad to `P` (a bucket times the device
-    count), search, unpad."""
-    if P == 1 and guesses is not None:  # one member: no batching to trace or run
-        return _search_single(model, guesses, sign, method, solver, bool(chord))
-
-    def pad(x):
-        x = jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])
-        x = jnp.concatenate([x, jnp.broadcast_to(x[:1], (P - B,) + x.shape[1:])])
-        return shard_batch(x, mesh)
-
-    model = jax.tree_util.tree_map(
-        lambda x: pad(x) if (eqx.is_array(x) and jnp.ndim(x) > 0) else x, model
-    )
-    axes = _batched_axes(model)
-    if guesses is None:
-        gaits = _from_reference_batch(model, sign, method, _HOMOTOPY_STEPS, axes)
-    else:
-        gaits = _search_batch(model, pad(guesses), sign, method, solver, axes, bool(chord))
-    return jax.tree_util.tree_map(lambda x: x[:B], gaits)

@@ -2,11 +2,10 @@
 section, and write the report."""
 
 import os
-import shutil
-import tempfile
 import time
 from typing import Any
 
+from .._io import pending_folder
 from ._report import Section, _write
 from ._sections import SECTIONS, Run
 
@@ -66,8 +65,7 @@ def reproduce(out_dir, quick=False, progress=None):
     mode = "quick" if quick else "full"
     # Figures go to a private folder first and move into `out_dir` only when every section
     # has run: an interrupted run leaves `out_dir` as it was.
-    work = tempfile.mkdtemp(prefix=".reproduce-", dir=out_dir)
-    try:
+    with pending_folder(out_dir, ".reproduce-") as work:
         run = Run(work, SIZES[mode])
         t_start = time.perf_counter()
         sections = []
@@ -82,5 +80,3 @@ def reproduce(out_dir, quick=False, progress=None):
         for name in sorted(os.listdir(work)):
             os.replace(os.path.join(work, name), os.path.join(out_dir, name))
         return _write(out_dir, sections, mode, time.perf_counter() - t_start)
-    finally:
-        shutil.rmtree(work, ignore_errors=True)

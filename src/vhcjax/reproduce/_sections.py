@@ -47,11 +47,15 @@ def _model(slope_deg):
 
 def _gaits(slopes_deg, guesses, family):
     """VHC gaits at `slopes_deg` from `guesses` (B, 2): one `find_gaits` call (padded to
-    a power of two, so that short vectors share one program); numpy pytree."""
+    a power of two, so that short vectors share one program; a single slope is sent
+    twice, since `find_gaits` runs one member by a program of its own); numpy pytree."""
     slopes = np.atleast_1d(np.asarray(slopes_deg, float))
-    guesses = np.broadcast_to(np.asarray(guesses, float), (len(slopes), 2))
+    n = len(slopes)
+    guesses = np.broadcast_to(np.asarray(guesses, float), (n, 2))
+    if n == 1:
+        slopes, guesses = np.repeat(slopes, 2), np.repeat(guesses, 2, axis=0)
     g = find_gaits(CompassGait(), jnp.asarray(guesses), family, psi=jnp.radians(slopes))
-    return jax.tree_util.tree_map(np.asarray, g)
+    return jax.tree_util.tree_map(lambda x: np.asarray(x)[:n], g)
 
 
 def _family(slopes_deg, family):
