@@ -3,6 +3,7 @@ gaits; floor-step terrain: the gait sensitivity norm from the linearized step-to
 vs simulated step times, and the largest survivable step up/down bracketed by simulation."""
 
 import equinox as eqx
+import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -48,11 +49,20 @@ def test_slope_derivatives_vs_finite_differences():
     np.testing.assert_allclose(np.sort(s.dmodulus), np.sort(fd_mod), rtol=1e-4)
 
 
-def test_gait_sensitivity_norm_vs_simulation():
+def test_gait_sensitivity_norm_vs_simulation(capfd):
+    """... and the floor-step recovery compiles without XLA's "circular simplification
+    loop" error on stderr (compiled here, not read from the persistent cache)."""
     model, _, x_star, _ = stable_gait()
     g = vj.gait_sensitivity_norm(model, x_star, 40)
     h = 1e-6
-    rec = vj.terrain_recovery(model, x_star, jnp.array([h, -h]), 40, 0.0, DEFAULT_CONFIG, False)
+    capfd.readouterr()
+    cache_on = jax.config.jax_enable_compilation_cache
+    jax.config.update("jax_enable_compilation_cache", False)
+    try:
+        rec = vj.terrain_recovery(model, x_star, jnp.array([h, -h]), 40, 0.0, DEFAULT_CONFIG, False)
+    finally:
+        jax.config.update("jax_enable_compilation_cache", cache_on)
+    assert "circular simplification" not in capfd.readouterr().err
     assert (np.asarray(rec.label) != 1).all()
     fd = (np.asarray(rec.step_times[0]) - np.asarray(rec.step_times[1])) / (2 * h)
     np.testing.assert_allclose(np.asarray(g.dtimes)[:12], fd[:12], rtol=1e-4, atol=1e-4)

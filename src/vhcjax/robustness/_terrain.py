@@ -68,7 +68,11 @@ def terrain_recovery(
     **Returns:** a `vhcjax.Recovery` (label, steps to converge, step times, distances).
     """
     h = jnp.asarray(h, dtype=float)
-    x0 = jnp.broadcast_to(x_star, (h.shape[0], x_star.shape[0]))
+    # Every member starts on the gait. Seen as one state broadcast over the batch, the
+    # start-up of the first step's ODE solve (diffrax's time clipping, equinox's bitwise
+    # `nextafter`) sends XLA's algebraic simplifier round a rewrite cycle (50 rounds and
+    # a logged error per compile); the barrier hides the broadcast, the numbers are equal.
+    x0 = jax.lax.optimization_barrier(jnp.broadcast_to(x_star, (h.shape[0], x_star.shape[0])))
     return recover(
         model,
         x0,
