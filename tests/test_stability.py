@@ -217,9 +217,10 @@ def test_period_four_gait_at_five_degrees():
 
 
 def test_period1_family_is_the_poincare_fixed_point_at_every_slope(gaits3):
-    """The family over slopes (the slope sweep, shooting) against an independent Newton
-    solve of P(z) = z (optimistix) at each slope, and the 3-degree gaits of `gaits3`; a
-    model far from Table 1 (mH = 1 kg) is found too."""
+    """The family over slopes (the slope sweep, VHC) against an independent Newton solve
+    of P(z) = z (optimistix) at each slope, and the 3-degree gaits of `gaits3`; for a
+    model far from Table 1 (mH = 1 kg) the VHC search ends (singular phi'' ODE) before
+    4.5 degrees, where the gait is found by shooting."""
     _, ref = gaits3
     for family in ("stable", "unstable"):
         psis = np.radians([2.0, 3.0, 4.0])
@@ -237,6 +238,8 @@ def test_period1_family_is_the_poincare_fixed_point_at_every_slope(gaits3):
             np.testing.assert_allclose(np.asarray(fp.z), z, atol=1e-10)
             assert abs(float(fp.periods[0]) - T) < 1e-10
     light = CompassGait(mH=1.0)
+    vhc = vhcjax.sweep(light, np.radians([3.5, 4.5]), "stable", tangents=False)
+    assert vhcjax.result_names(vhc.gaits.result) == ["successful", "singular_phi_ode"]
     fam = vhcjax.period1_family(np.radians([3.5, 4.5]), "stable", model=light)
     assert vhcjax.result_names(fam.result) == ["successful"] * 2
     for p, z in zip(np.radians([3.5, 4.5]), np.asarray(fam.z)):
@@ -244,3 +247,12 @@ def test_period1_family_is_the_poincare_fixed_point_at_every_slope(gaits3):
         assert float(jnp.max(jnp.abs(out.z_next - z))) < 1e-10
     with pytest.raises(TypeError, match="compass-gait"):
         vhcjax.period1_family([PSI3], model=vhcjax.KneedWalker())
+    # a slope that is not finite and positive is coded, the others solved; an old seed
+    # (an array) is ignored with a warning
+    with pytest.warns(DeprecationWarning, match="seed"):
+        fam = vhcjax.period1_family(
+            np.radians([3.0, -1.0, np.nan]), "stable", seed=np.asarray(ref["stable"][0])
+        )
+    assert vhcjax.result_names(fam.result) == ["successful", "bad_input", "bad_input"]
+    np.testing.assert_allclose(np.asarray(fam.z)[0], ref["stable"][0], atol=1e-10)
+    assert np.isfinite(np.asarray(fam.z)).all() and np.isfinite(np.asarray(fam.periods)).all()

@@ -31,9 +31,14 @@ def gaits():
             psis.append(math.radians(deg))
             seeds.append(z)
             fams.append(fam)
-    fps = S._fixed_points_batch(
-        CompassGait(), jnp.asarray(psis), jnp.asarray(seeds), 1, vhcjax.DEFAULT_CONFIG
+    solve = jax.jit(
+        jax.vmap(
+            lambda p, z: vhcjax.fixed_point(
+                S.with_slope(CompassGait(), p), z, 1, config=vhcjax.DEFAULT_CONFIG
+            )
+        )
     )
+    fps = solve(jnp.asarray(psis), jnp.asarray(seeds))
     assert vhcjax.result_names(fps.result) == ["successful"] * len(psis)
     assert float(jnp.max(fps.residual)) < 1e-10
     return np.asarray(psis), np.asarray(fps.z), fams

@@ -165,9 +165,9 @@ def padded_map(fn, *args, max_chunk=MAX_DISPATCH, mesh=None, stage="batch", prog
     """`fn(*args)` for a batch of `n` members (the leading axis of the leaves of `args`),
     run in chunks of one padded size: the library's one padding rule.
 
-    The size is the smallest power of two that holds the batch (`bucket_size`) or
-    `max_chunk` if that is smaller, rounded up to a multiple of the device count of `mesh` (default: all
-    local devices), so that batches of nearby sizes share one compiled program (tracing
+    The size (`dispatch_size`) is the smallest power of two that holds the batch
+    (`bucket_size`) or `max_chunk` if that is smaller, rounded up to a multiple of the
+    device count of `mesh` (default: all local devices), so that batches of nearby sizes share one compiled program (tracing
     and compiling cost far more than running a few padding members). Each chunk is padded
     with copies of its first member (a valid input, so padding neither fails nor slows the
     chunk), split over the devices (`shard_batch`) and run, up to `host_workers` chunks

@@ -6,8 +6,8 @@ import os
 import shutil
 import tempfile
 
-#: Temporary files (and folders) being written now; removed by `remove_pending` (the command line calls
-#: it when interrupted, so that no partial file is left behind).
+#: Temporary files and folders being written now; removed by `remove_pending` (the
+#: command line calls it when interrupted, so that no partial file is left behind).
 PENDING: set[str] = set()
 
 

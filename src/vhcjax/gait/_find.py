@@ -140,10 +140,11 @@ def find_gaits(
 
     With `solver="newton"` one Newton loop iterates every member of a batch, each member
     stopping at its own convergence (`damped_newton_batch`); other solvers run by `vmap`.
-    Batches are padded (with copies of the first member) to a power of two per device,
-    so that nearby sizes share one compiled program; larger batches run in chunks of 128
-    per device, concurrently from one host thread per CPU core (`_batching.host_workers`;
-    XLA runs each program on one core). Each chunk is split over the devices of `mesh`.
+    Batches are padded (with copies of the first member) to a power of two, rounded up to
+    a multiple of the device count, so that nearby sizes share one compiled program
+    (`_batching.padded_map`); larger batches run in chunks of 128 per device,
+    concurrently from one host thread per CPU core (`_batching.host_workers`; XLA runs
+    each program on one core). Each chunk is split over the devices of `mesh`.
     A different split changes the results by rounding only, with the same result codes.
 
     Differentiable like `find_gait`; a failed member has zero derivatives.
@@ -182,7 +183,8 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord):
     if B == 1 and guesses is not None:  # one member: no batching to trace or run
         gaits = _search_single(model, guesses, sign, method, solver, bool(chord))
         return _clean_failed(_relabel(gaits, family), guesses, B)
-    chunk = _chunk_size(B, host_workers(mesh), mesh)
+    # one member (a homotopy, no guess) runs alone: a padded batch would repeat its work
+    chunk = 1 if B == 1 else _chunk_size(B, host_workers(mesh), mesh)
     if chord is None:  # members per device of one dispatch (every chunk: one program)
         chord = dispatch_size(B, chunk, mesh) // device_multiple(mesh) >= _CHORD_MIN_MEMBERS
     # the batched parameters, each with B rows; the rest is shared by every member

@@ -275,10 +275,12 @@ def multidomain_trajectory(model, x0, num_points=50, config=DEFAULT_CONFIG):
 
 
 def dense_cycle(model, x0, num_points, config=DEFAULT_CONFIG, alive=True):
-    """One cycle on `num_points` times per domain, joined: times from the start of the
-    cycle (shape `(num_domains * num_points,)`) and states (`(..., 2n)`), as
-    `vhcjax.simulate(..., dense_points=num_points)` returns them for a multi-domain model."""
-    _, info = multidomain_step(model, x0, config, alive)
+    """One cycle and its states on `num_points` times per domain, joined, as
+    `vhcjax.simulate(..., dense_points=num_points)` returns them for a multi-domain model.
+
+    **Returns:** `(StepResult, ts, xs)`: the cycle (as `multidomain_step`), times from its
+    start (shape `(num_domains * num_points,)`) and states (`(..., 2n)`)."""
+    sr, info = multidomain_step(model, x0, config, alive)
     ts, xs = _domain_grids(model, info, num_points, config)
     starts = jnp.concatenate([jnp.zeros(1, ts.dtype), jnp.cumsum(info.duration)[:-1]])
-    return (ts + starts[:, None]).reshape(-1), xs.reshape(-1, xs.shape[-1])
+    return sr, (ts + starts[:, None]).reshape(-1), xs.reshape(-1, xs.shape[-1])

@@ -325,9 +325,18 @@ def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
     # every step carries `bad_input`, whatever the dynamics would have done with it.
     valid = model.validate() if hasattr(model, "validate") else jnp.asarray(True)
 
+    multidomain_dense = bool(dense_points) and hasattr(model, "num_domains")
+
     def body(carry, _):
         x, alive, first_fail = carry
-        sr = step_unchecked(model, x, config, alive=alive)
+        if multidomain_dense:  # the cycle once, with what its dense output needs
+            from ._multidomain import dense_cycle
+
+            sr, ts, ys = dense_cycle(model, x, dense_points, config, alive)
+            dense = (jnp.where(alive, ts, 0.0), jnp.where(alive, ys, x))
+        else:
+            sr = step_unchecked(model, x, config, alive=alive)
+            dense = None
         ok = alive & (sr.result == RESULTS.successful)
         new_fail = RESULTS.where(alive & ~ok, sr.result, first_fail)
         result = RESULTS.where(alive, sr.result, first_fail)
@@ -339,12 +348,7 @@ def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
             sr.impulse,
             result,
         )
-        if dense_points and hasattr(model, "num_domains"):  # a MultiDomainModel
-            from ._multidomain import dense_cycle
-
-            ts, ys = dense_cycle(model, x, dense_points, config, alive)
-            dense = (jnp.where(alive, ts, 0.0), jnp.where(alive, ys, x))
-        elif dense_points:
+        if dense_points and not multidomain_dense:
             ts = jnp.linspace(0.0, 1.0, dense_points) * jnp.where(alive, sr.period, 0.0)
             sol = flow(
                 model,
@@ -356,8 +360,6 @@ def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
             )
             assert sol.ys is not None  # saved at `ts`
             dense = (ts, jnp.where(alive, sol.ys, x))
-        else:
-            dense = None
         return (x_next, ok, new_fail), (out, dense)
 
     init = (x0, valid, RESULTS.where(valid, RESULTS.successful, RESULTS.bad_input))

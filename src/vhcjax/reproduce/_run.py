@@ -63,8 +63,8 @@ def reproduce(out_dir, quick=False, progress=None):
     `update(1)` per section). **Returns:** the results dict."""
     os.makedirs(out_dir, exist_ok=True)
     mode = "quick" if quick else "full"
-    # Figures go to a private folder first and move into `out_dir` only when every section
-    # has run: an interrupted run leaves `out_dir` as it was.
+    # Figures and report go to a private folder first and move into `out_dir` only when
+    # every section has run: an interrupted run leaves `out_dir` as it was.
     with pending_folder(out_dir, ".reproduce-") as work:
         run = Run(work, SIZES[mode])
         t_start = time.perf_counter()
@@ -77,6 +77,10 @@ def reproduce(out_dir, quick=False, progress=None):
             sections.append(sec)
             if progress is not None:
                 progress.update(1)
-        for name in sorted(os.listdir(work)):
+        results = _write(work, sections, mode, time.perf_counter() - t_start)
+        # the figures first, the report last: a report names only figures already there
+        last = ("results.json", "report.md")
+        names = sorted(set(os.listdir(work)) - set(last)) + list(last)
+        for name in names:
             os.replace(os.path.join(work, name), os.path.join(out_dir, name))
-        return _write(out_dir, sections, mode, time.perf_counter() - t_start)
+        return results

@@ -3,8 +3,8 @@ per analysis of the library: `fn(run, sec)` computes, fills the report `Section`
 and writes its figures into `run.out_dir`; what later sections reuse (the gaits of
 chapter 7, their multipliers, the period-doubling slope) goes into the `Run`.
 
-Compilation dominates the run time, so all sections share a few jitted entry points
-with fixed batch shapes: `find_gaits` (batches of 8, or 64 for the full sweeps),
+Compilation dominates the run time, so the sections share a few jitted entry points
+with fixed batch shapes: `find_gaits` (batches of 8), the slope sweep (`vhcjax.sweep`),
 `family_multipliers` (chunks of 8), one `simulate` shape, `jacobian`/`step_map` (k = 1).
 """
 
@@ -249,10 +249,11 @@ def gaits(run, sec):
         "result codes per gait (uphill: infeasible_uphill expected)",
     )
     sec.notes.append(
-        "All gaits of this report come from one batched call of the VHC search "
+        "The gaits of chapter 7 come from one batched call of the VHC search "
         "(thesis Problem 1, `find_gaits`) from the thesis seed (7.2) a0 = 0.20, "
         "b0 = -1.0 (uphill: b0 = +1.0, 7.17), with the minus root of (5.13) (7.3) for "
-        "the stable family and the plus root (7.8) for the unstable one."
+        "the stable family and the plus root (7.8) for the unstable one; the slope "
+        "sweeps and the bifurcation diagram follow the families with `vhcjax.sweep`."
     )
 
 

@@ -16,6 +16,7 @@
 """
 
 import math
+import warnings
 
 import diffrax
 import equinox as eqx
@@ -43,7 +44,7 @@ from ..models import CompassGait
 from ._transverse import TransverseLinearization, transverse_linearization
 
 #: Stable and unstable period-1 gaits of the default compass gait at 3 degrees
-#: (section coordinates $(q_1, \dot q_1, \dot q_2)$), seeds for the continuation.
+#: (section coordinates $(q_1, \dot q_1, \dot q_2)$), e.g. Newton seeds for `fixed_point`.
 SEEDS_3DEG = {
     "stable": (0.2186688, -1.09238359, -0.37737395),
     "unstable": (0.20467554, -1.21057184, -0.71248882),
@@ -363,7 +364,7 @@ def period1_family(
     family="stable",
     *,
     model=None,
-    method="shooting",
+    method="vhc",
     coarse_step=math.radians(0.1),
     seed=None,
     seed_psi=None,
@@ -374,18 +375,19 @@ def period1_family(
     The slope sweep of the gait search (`vhcjax.sweep`): the gait at 3 degrees by homotopy
     from the reference model, a continuation over anchor slopes at most `coarse_step`
     apart, then one batched Newton solve at every slope, missed slopes retried from
-    their neighbours. `method="shooting"` (default) solves for the fixed point of the
-    Poincare map (thesis Problem 2); `"vhc"` solves thesis Problem 1 (faster, but it
-    ends where the phi'' ODE becomes singular).
+    their neighbours. `method="vhc"` (default) solves thesis Problem 1; where its
+    assumption fails (the phi'' ODE becomes singular along the step) those slopes are
+    solved again by shooting, the fixed point of the Poincare map (thesis Problem 2),
+    which `method="shooting"` uses throughout.
 
     `seed`, `seed_psi` and `config` are accepted for old calls and ignored (a warning):
-    the sweep needs no seed and solves every gait to 1e-12.
+    the sweep needs no seed and solves every gait to 1e-12. A slope that is not finite
+    and positive gets the code `bad_input`; another model than a compass gait raises
+    `TypeError`.
 
     **Returns:** a `Family`; `z` holds the section coordinates $(q_1, \\dot q_1,
     \\dot q_2)$ after impact, `periods` the step periods, `result` the code per slope.
     """
-    import warnings
-
     from ..gait import sweep
 
     model = CompassGait() if model is None else model
@@ -394,7 +396,8 @@ def period1_family(
             "period1_family follows compass-gait families; for another model solve each "
             "slope with vhcjax.fixed_point (it works under jax.vmap)"
         )
-    ignored = [k for k, v in (("seed", seed), ("seed_psi", seed_psi), ("config", config)) if v]
+    given = (("seed", seed), ("seed_psi", seed_psi), ("config", config))
+    ignored = [k for k, v in given if v is not None]
     if ignored:
         warnings.warn(
             f"period1_family: {', '.join(ignored)} ignored (the sweep needs no seed)",
@@ -402,9 +405,22 @@ def period1_family(
             stacklevel=2,
         )
     psis = np.atleast_1d(np.asarray(psis, float))
-    sw = sweep(model, psis, family, method, anchor_step=coarse_step, tangents=False)
-    g = sw.gaits
-    return Family(sw.psi, g.z, g.T, g.result)
+    # a slope that is not finite and positive (downhill) is `bad_input`, the rest is solved
+    valid = np.isfinite(psis) & (psis > 0)
+    z = np.zeros((len(psis), 2 * model.n_dof - 1))
+    periods = np.zeros(len(psis))
+    codes = np.full(len(psis), int(RESULTS.bad_input._value), dtype=np.int32)
+    for m in (method, "shooting") if method == "vhc" else (method,):
+        # the VHC search first; the slopes where its phi'' ODE is singular by shooting
+        todo = valid if m == method else codes == int(RESULTS.singular_phi_ode._value)
+        if not todo.any():
+            continue
+        g = sweep(model, psis[todo], family, m, anchor_step=coarse_step, tangents=False).gaits
+        z[todo] = np.asarray(g.z)
+        periods[todo] = np.asarray(g.T)
+        codes[todo] = np.asarray(g.result._value)
+    result = eqx.tree_at(lambda r: r._value, RESULTS.successful, jnp.asarray(codes))
+    return Family(jnp.asarray(psis), jnp.asarray(z), jnp.asarray(periods), result)
 
 
 # ---- period doubling --------------------------------------------------------------------
