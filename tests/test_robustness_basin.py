@@ -64,6 +64,26 @@ def test_chunks_on_host_threads_give_the_same_classification(slice8, monkeypatch
         np.testing.assert_array_equal(out[key][64:], out[key][:64][::-1])
 
 
+@pytest.mark.parametrize(("workers", "expected"), [("2", 256), ("1", 1024)])
+def test_concurrent_chunks_are_at_most_max_dispatch(monkeypatch, workers, expected):
+    """Two concurrent 1,024-member chunks of the basin program deadlock XLA's CPU runtime
+    (`vhcjax basin` with its defaults hung): with several host workers a chunk holds at
+    most `MAX_DISPATCH` points; one worker keeps the chunk asked for."""
+    import vhcjax.robustness._basin as B
+
+    seen = {}
+
+    def record(fn, *args, max_chunk, **kwargs):
+        seen["max_chunk"] = max_chunk
+        raise RuntimeError("recorded")
+
+    monkeypatch.setattr(B, "padded_map", record)
+    monkeypatch.setenv("VHCJAX_HOST_WORKERS", workers)
+    with pytest.raises(RuntimeError, match="recorded"):
+        B.classify_section_points(vj.CompassGait(), np.zeros(3), np.zeros((4096, 3)), chunk=1024)
+    assert seen["max_chunk"] == expected
+
+
 def test_max_converging_perturbation_brackets():
     model, z, x_star, _ = stable_gait()
     d = axis_directions(3)[:2]  # +q1, -q1

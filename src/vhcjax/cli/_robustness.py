@@ -124,7 +124,12 @@ def register(subparsers):
         default=1e-4,
         help="convergence tolerance, in (0, 1]",
     )
-    p.add_argument("--chunk", type=count(1, 1_000_000), default=1024, help="batch size of one call")
+    p.add_argument(
+        "--chunk",
+        type=count(1, 1_000_000),
+        default=1024,
+        help="batch size of one call (at most 256 on a CPU with several cores)",
+    )
     p.add_argument(
         "--volume-samples",
         type=count(0, MAX_SAMPLES),

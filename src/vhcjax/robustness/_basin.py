@@ -17,7 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._batching import padded_map
+from .._batching import MAX_DISPATCH, host_workers, padded_map
 from .._programs import stored_jit
 from ..hybrid import FAST_CONFIG
 from ._bisection import bisect_threshold
@@ -59,13 +59,18 @@ def classify_section_points(
     The points run in chunks of at most `chunk` (`_batching.padded_map`: padded to a
     power of two and a multiple of the device count, split over the devices of `mesh`,
     default all local devices, so the same call uses every GPU of a machine, or of several
-    hosts after `jax.distributed.initialize()`; on a CPU one chunk per core at a time).
+    hosts after `jax.distributed.initialize()`; on a CPU one chunk per core at a time, of
+    at most `_batching.MAX_DISPATCH` points).
     `progress` optionally wraps the list of chunks (a progress bar).
 
     **Returns:** dict of numpy arrays: `label`, `steps`, `period`, `result` (integer
     `RESULTS` codes), `z_final`.
     """
     z_star = jnp.asarray(z_star, float)
+    if host_workers(mesh) > 1:
+        # Chunks run concurrently on a CPU, and two concurrent dispatches of this program
+        # with 1,024 members each deadlock XLA's CPU runtime (every thread idle).
+        chunk = min(chunk, MAX_DISPATCH)
     rec = padded_map(
         lambda part: _recover_chunk(model, part, z_star, num_steps, tol, config),
         np.asarray(z, dtype=float),
