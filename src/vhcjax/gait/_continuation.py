@@ -58,7 +58,9 @@ def _path(start, end):
 def _continue(start, end, s_buf, n, z0, sign, method):
     """Follow the solution of the model `_path(start, end)(s)` through `s_buf[:n]`
     (a `fori_loop` with a dynamic length over a fixed-size buffer), from the seed `z0` at
-    `s_buf[0]`, with a tangent predictor. A failed point does not move the anchor: the
+    `s_buf[0]`, with a tangent predictor. The first point is the seed's own parameter, so
+    it needs no tangent: each tangent comes from the point just solved (one copy of the
+    residual's Jacobian in the program). A failed point does not move the anchor: the
     next one is predicted from the last success.
 
     **Returns:** a batched `Gait` (one per buffer entry; entries from `n` on are unset)
@@ -66,7 +68,7 @@ def _continue(start, end, s_buf, n, z0, sign, method):
     """
     path = _path(start, end)
     s0 = s_buf[0]
-    t0 = _tangent(path, s0, z0, sign, method)
+    t0 = jnp.zeros_like(z0)
     shape = jax.eval_shape(lambda: _search(path(s0), z0, sign, method))
     buf = jax.tree_util.tree_map(lambda l: jnp.zeros((s_buf.shape[0],) + l.shape, l.dtype), shape)
     tbuf = jnp.zeros((s_buf.shape[0], z0.shape[0]), z0.dtype)
