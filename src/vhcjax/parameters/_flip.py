@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._batching import padded_map
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..gait import find_gait, find_gaits
@@ -45,25 +46,73 @@ def _det_and_radius(model, zs):
     return eqx.filter_vmap(one, in_axes=(axes, 0))(model, zs)
 
 
-def _broadcast(model, B):
+def _broadcast(model, B, every=False):
+    """Array leaves with a leading axis broadcast to `B` members (`every`: scalars too)."""
     return jax.tree_util.tree_map(
         lambda x: (
-            jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])
-            if (eqx.is_array(x) and jnp.ndim(x) > 0)
+            jnp.broadcast_to(x, (B,) + jnp.shape(x)[min(1, jnp.ndim(x)) :])
+            if (eqx.is_array(x) and (every or jnp.ndim(x) > 0))
             else x
         ),
         model,
     )
 
 
-def _evaluate(model, psi, zs, solver="newton"):
-    """Gaits at slopes `psi` (B,) from guesses `zs` (B, 3): section points, ok, F, rho."""
-    gaits = find_gaits(model, zs, method="shooting", psi=psi, solver=solver)
+#: A batch of more than this many models is solved only at the members that still need
+#: it (the others have bracketed their flip, converged or lost their gait), padded to a
+#: multiple of this size by repeating one of them: every such subset runs the compiled
+#: programs of the full batch.
+_SUBSET = 256
+
+
+def _members(mask):
+    """Indices of the batch to solve: all of a small batch; in a large one the members
+    in `mask`, padded to a multiple of `_SUBSET`."""
+    B = mask.size
+    if B <= _SUBSET:
+        return np.arange(B)
+    idx = np.flatnonzero(mask)
+    if idx.size == 0:
+        return idx
+    n = -(-idx.size // _SUBSET) * _SUBSET
+    return np.concatenate([idx, np.full(n - idx.size, idx[0])])
+
+
+def _take(model, idx):
+    """The members `idx` of a batch of models (every array leaf with a leading axis)."""
+    return jax.tree_util.tree_map(
+        lambda x: jnp.asarray(x)[idx] if (eqx.is_array(x) and jnp.ndim(x) > 0) else x, model
+    )
+
+
+def _det_and_radius_batch(model, zs):
+    """`_det_and_radius` of a batch: one dispatch for a small batch, chunks of one size
+    for a large one (run one per CPU core at a time, `padded_map`)."""
+    n = np.shape(zs)[0]
+    if n <= _SUBSET:
+        return _det_and_radius(model, jnp.asarray(zs))
+    return padded_map(_det_and_radius, _broadcast(model, n, every=True), jnp.asarray(zs))
+
+
+def _evaluate(model, psi, zs, mask, solver="newton"):
+    """Gaits at slopes `psi` (B,) from guesses `zs` (B, 3) of the members in `mask`:
+    section points, ok, F, rho (the other members of a large batch: their guess, False,
+    NaN, NaN; see `_SUBSET`)."""
+    B = zs.shape[0]
+    z_out, ok_out = zs.copy(), np.zeros(B, bool)
+    F_out, rho_out = np.full(B, np.nan), np.full(B, np.nan)
+    idx = _members(mask)
+    if idx.size == 0:
+        return z_out, ok_out, F_out, rho_out
+    sub = _take(model, idx)
+    gaits = find_gaits(sub, jnp.asarray(zs[idx]), method="shooting", psi=psi[idx], solver=solver)
     ok = np.asarray(gaits.result == RESULTS.successful)
     z = np.asarray(gaits.z)
-    F, rho = _det_and_radius(_with_psi(model, psi), jnp.asarray(z))
-    F, rho = np.asarray(F), np.asarray(rho)
-    return z, ok, np.where(ok, F, np.nan), np.where(ok, rho, np.nan)
+    F, rho = _det_and_radius_batch(_with_psi(sub, psi[idx]), z)
+    z_out[idx], ok_out[idx] = z, ok
+    F_out[idx] = np.where(ok, np.asarray(F), np.nan)
+    rho_out[idx] = np.where(ok, np.asarray(rho), np.nan)
+    return z_out, ok_out, F_out, rho_out
 
 
 class FlipScan(eqx.Module):
@@ -131,7 +180,7 @@ def flip_slopes(
         todo = alive & ~bracket
         if not todo.any():
             break
-        zs, ok, F, rho = _evaluate(model, np.full(B, psi), z)
+        zs, ok, F, rho = _evaluate(model, np.full(B, psi), z, todo)
         stable = ok & (rho < 1)
         lo = np.where(todo & stable & np.isnan(lo), psi, lo)
         cross = todo & ok & (F < 0) & np.isfinite(fa)
@@ -168,7 +217,7 @@ def flip_slopes(
         zc_guess = np.where(active[:, None], za + (zb - za) * w, za)
         # Plain Newton (optimistix) here: the guesses are already very close, closer
         # than the loose first integration of the damped search resolves.
-        zc, ok, Fc, _ = _evaluate(model, np.where(active, c, a), zc_guess, "optimistix")
+        zc, ok, Fc, _ = _evaluate(model, np.where(active, c, a), zc_guess, active, "optimistix")
         failed = active & ~ok
         for i in np.nonzero(failed)[0]:
             reason[i] = "the refinement lost the gait inside the bracket"
