@@ -132,6 +132,25 @@ def test_multipliers_autodiff_vs_central_differences(kw, gait):
     assert np.abs(ev).max() < 1.0  # the passive gait is stable
 
 
+def test_gait_derivatives_forward_reverse_and_central_differences(gait):
+    """`fixed_point` of a multi-domain model is differentiable in both modes (implicit
+    function theorem at the gait): d z / d (mh, psi) by `jax.jacfwd` and `jax.jacrev`
+    against central differences of re-solved gaits."""
+
+    def z_of(p):  # the compiled search runs on the values; only the derivative compiles
+        return fixed_point_jit(KneedWalker(mh=p[0], psi=p[1]), gait.z).z
+
+    p = jnp.array([0.5, 0.0504])
+    Jf = np.asarray(jax.jacfwd(z_of)(p))
+    Jr = np.asarray(jax.jacrev(z_of)(p))
+    np.testing.assert_allclose(Jr, Jf, rtol=1e-10, atol=1e-12 * np.abs(Jf).max())
+    h = 1e-5
+    E = h * np.eye(2)
+    Jfd = np.stack([(z_of(p + e) - z_of(p - e)) / (2 * h) for e in E], axis=1)
+    np.testing.assert_allclose(Jf, Jfd, atol=1e-6 * np.abs(Jfd).max())
+    assert np.abs(Jf).min() > 1e-3  # every entry is a real dependence
+
+
 @pytest.mark.slow
 def test_slope_range_by_continuation(kw, gait):
     """Stable gaits exist from 0.0354 to 0.1054 rad (continuation in 0.005 steps from the

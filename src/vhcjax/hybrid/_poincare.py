@@ -10,11 +10,13 @@ multipliers of a gait, independently of the transverse linearization (thesis ch.
 
 import equinox as eqx
 import jax
+import jax.core
 import jax.numpy as jnp
 import optimistix as optx
 
 from .._programs import stored_jit
 from .._results import RESULTS
+from ..solvers import detach, implicit_outputs
 from ._simulate import DEFAULT_CONFIG, step_unchecked
 
 
@@ -79,11 +81,14 @@ class FixedPoint(eqx.Module):
     result: RESULTS
 
 
-def fixed_point(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, config=DEFAULT_CONFIG):
-    """Solve $P^k(z) = z$ by Newton (optimistix) with forward-mode Jacobians (Problem 2).
+def _fixed_point_equation(z, model, k, config):
+    """$P^k(z) - z$ and the step periods (for the implicit derivatives of `fixed_point`)."""
+    out = step_map(model, z, k, config)
+    return out.z_next - z, out.periods
 
-    Never raises: inspect `result` (use under `vmap` freely).
-    """
+
+def _search(model, z0, k, rtol, atol, max_steps, config):
+    """The Newton search of `fixed_point` (on a model it does not differentiate)."""
     z0 = jnp.asarray(z0, dtype=float)
 
     def residual_fn(z, _):
@@ -116,9 +121,49 @@ def fixed_point(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, config=
     )
 
 
+def _with_derivatives(params, fp, k, config):
+    """`fp` (found on the detached `params`) with implicit derivatives with respect to
+    `params`; unchanged where `params` holds no tracer (nothing to differentiate)."""
+    if not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(params)):
+        return fp
+    z, periods = implicit_outputs(
+        _fixed_point_equation,
+        fp.z,
+        params,
+        fp.periods,
+        fp.result == RESULTS.successful,
+        static=(k, config),
+    )
+    return FixedPoint(z, params.section_to_state(z), periods, fp.iterations, fp.residual, fp.result)
+
+
+def fixed_point(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, config=DEFAULT_CONFIG):
+    """Solve $P^k(z) = z$ by Newton (optimistix) with forward-mode Jacobians (Problem 2).
+
+    Never raises: inspect `result` (use under `vmap` freely). Differentiable with respect
+    to the model's parameters (`jax.jvp`, `jax.jacfwd`, `jax.grad`, `jax.jacrev`) by the
+    implicit function theorem at the fixed point (`vhcjax.solvers.implicit_outputs`),
+    never through the Newton iterations; a failed search has zero derivatives.
+    """
+    z0 = jax.lax.stop_gradient(jnp.asarray(z0, dtype=float))
+    fp = _search(detach(model), z0, k, rtol, atol, max_steps, config)
+    return _with_derivatives(model, fp, k, config)
+
+
+_search_jit = stored_jit(_search)
+
+
+def fixed_point_jit(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, config=DEFAULT_CONFIG):
+    """`fixed_point` with its search compiled once per process (a stored program). Its
+    derivatives run the same compiled search (on the parameters' values) and compile
+    only the implicit-derivative program."""
+    z0 = jax.lax.stop_gradient(jnp.asarray(z0, dtype=float))
+    fp = _search_jit(detach(model), z0, k, rtol, atol, max_steps, config)
+    return _with_derivatives(model, fp, k, config)
+
+
 # Shared jitted entry points (stored, see `vhcjax._programs`): one compile cache per
 # function for the whole library.
 step_map_jit = stored_jit(step_map)
 jacobian_jit = stored_jit(jacobian)
 multipliers_jit = stored_jit(multipliers)
-fixed_point_jit = stored_jit(fixed_point)
