@@ -39,6 +39,11 @@ def test_flip_slope_derivative_vs_located_flips():
     # the located flip is the one of the existing bisection on det(I + J)
     pd = vj.period_doubling_slope(math.radians(4.0), math.radians(4.8), z0, model=m0, tol=1e-12)
     assert abs(math.degrees(float(flip(10.0)) - pd.psi)) < 1e-8
+    # started from the gait of the differentiated model itself (as `design` does)
+    res = vj.design("flip-slope", ["mass-hip"], model=m0, steps=1)
+    assert abs(res.initial["value"] - pd.psi) < 1e-10  # rad
+    assert abs(res.initial["gradient"]["mass-hip"] - d) < 1e-8 * abs(d)
+    assert res.history[-1]["value"] > res.initial["value"]  # maximised
 
 
 def test_design_spectral_radius():

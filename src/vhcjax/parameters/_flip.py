@@ -261,7 +261,7 @@ def flip_slope(model, z_start, *, psi_max=math.radians(12.0), step=math.radians(
     params = model
     m = detach(model)
     scan = flip_slopes(
-        m, np.asarray(z_start, float)[None], float(m.psi), psi_max=psi_max, step=step
+        m, np.asarray(detach(z_start), float)[None], float(m.psi), psi_max=psi_max, step=step
     )
     psi_f, z_f = float(scan.psi[0]), scan.z[0]
     return _attach_flip(params, jnp.asarray(psi_f), jnp.asarray(z_f))
