@@ -46,6 +46,7 @@ DESIGN_KEYS = {
         (["design", "--objective", "speed", "--vary", "a", "--mass-hip", "-3"], "--mass-hip"),
         (["atlas", "--mass-ratio", "1:0:1", "--length-ratio", "1"], "--mass-ratio"),
         (["atlas", "--mass-ratio", "1,x", "--length-ratio", "1"], "--mass-ratio"),
+        (["atlas", "--mass-ratio", "1:1e12:1e-6", "--length-ratio", "1"], "--mass-ratio"),
         (["atlas", "--mass-ratio", "2", "--length-ratio", "-1"], "--length-ratio"),
         (["atlas", "--mass-ratio", "2", "--length-ratio", "nan"], "--length-ratio"),
         (["atlas", "--mass-ratio", "2", "--length-ratio", "1", "--slope-deg", "45"], "--slope-deg"),
@@ -143,3 +144,10 @@ def test_atlas_json_csv_png(tmp_path, capsys):
     assert png.stat().st_size > 10_000
     assert "NaN" not in json.dumps(out) and "Infinity" not in json.dumps(out)
     assert np.isfinite(float(rows[0]["spectral_radius"]))
+
+
+def test_ratio_ranges_never_pass_stop():
+    from vhcjax.cli._design import parse_values
+
+    assert parse_values("1:2:1.5", "--mass-ratio") == [1.0]
+    assert parse_values("1:2:0.5", "--mass-ratio") == [1.0, 1.5, 2.0]

@@ -150,6 +150,10 @@ def _unwritable_cases(tmp_path):
         ("slope-sensitivity", "--png", "png"),
         ("push", "--png", "png"),
         ("simulate", "--animate", "gif"),
+        ("design", "--png", "png"),
+        ("atlas", "--csv", "csv"),
+        ("atlas", "--png", "png"),
+        ("stabilize", "--png", "png"),
     ]:
         for path in (f"{missing}.{ext}", f"/proc/vhcjax-test.{ext}", folder):
             if flag == "--animate" and path == folder:

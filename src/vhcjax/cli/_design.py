@@ -9,9 +9,11 @@ from ._common import (
     CLIError,
     add_model_flags,
     check_finite,
+    check_output_file,
     count,
     model_from_args,
     number,
+    parse_range,
     print_json,
     progress,
 )
@@ -169,15 +171,11 @@ def parse_bounds(text, vary):
 
 
 def parse_values(text, name):
-    """`START:STOP:STEP` (inclusive) or a comma-separated list of positive numbers."""
+    """`START:STOP:STEP` (STOP included when on the grid, never passed) or a
+    comma-separated list of positive numbers."""
     try:
         if ":" in text:
-            start, stop, step = (float(x) for x in text.split(":"))
-            check_finite(name, start, stop, step)
-            if step <= 0 or stop < start:
-                raise CLIError(f"{name} needs STEP > 0 and STOP >= START, got {text!r}")
-            n = int(math.floor((stop - start) / step + 0.5)) + 1
-            values = [start + i * step for i in range(n)]
+            values = parse_range(text, name)  # never past STOP
         else:
             values = [float(x) for x in text.split(",")]
     except ValueError:
@@ -201,6 +199,7 @@ def run_design(args):
     from ..parameters import design
 
     model = model_from_args(args)
+    check_output_file(args.png, "--png")
     vary = parse_vary(args.vary)
     bounds = parse_bounds(args.bounds, vary)
     if not 1 <= args.steps <= 1000:
@@ -299,6 +298,8 @@ def run_atlas(args):
     from ..parameters import atlas, atlas_json
 
     model_from_args(args, slope_deg=3.0)  # validates the model flags
+    check_output_file(args.csv, "--csv")
+    check_output_file(args.png, "--png")
     mu = parse_values(args.mass_ratio, "--mass-ratio")
     beta = parse_values(args.length_ratio, "--length-ratio")
     if args.slope_deg is not None:
@@ -328,7 +329,9 @@ def run_atlas(args):
     )
     rec = atlas_json(at)
     if args.csv:
-        with open(args.csv, "w", newline="") as fh:
+        from .._io import atomic_open
+
+        with atomic_open(args.csv, "w", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=ATLAS_CSV)
             w.writeheader()
             for c in rec["cells"]:

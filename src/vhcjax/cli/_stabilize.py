@@ -7,6 +7,7 @@ from ._common import (
     CLIError,
     add_model_flags,
     check_finite,
+    check_output_file,
     count,
     model_from_args,
     number,
@@ -135,6 +136,7 @@ def _finite_or_none(obj):
 
 def run_stabilize(args):
     q = _check(args)
+    check_output_file(args.png, "--png")
     import equinox as eqx
     import jax
     import jax.numpy as jnp
