@@ -44,6 +44,16 @@ def test_slopes_in_any_order_and_far_from_three_degrees():
     np.testing.assert_allclose(np.asarray(sw.gaits.x_plus[2]), np.asarray(g.x_plus), atol=1e-10)
 
 
+def test_tiny_slopes_are_found():
+    # toward zero slope the gaits change ever faster: the anchors go down geometrically
+    deg = np.array([0.05, 0.01, 0.3])
+    sw = vj.sweep(vj.CompassGait(), np.radians(deg), "stable")
+    assert bool(np.all(np.asarray(sw.ok))) and sw.ends() == []
+    for i in (0, 1):  # the homotopy straight from the reference gait, no sweep
+        g = vj.find_gait(vj.CompassGait(psi=math.radians(deg[i])), "stable")
+        np.testing.assert_allclose(np.asarray(sw.gaits.x_plus[i]), np.asarray(g.x_plus), atol=1e-10)
+
+
 def test_real_ends_are_reported_with_their_cause():
     # The unstable family loses its real root (5.13) between 14.7 and 14.8 degrees.
     deg = np.array([13.0, 14.0, 15.0, 16.0])

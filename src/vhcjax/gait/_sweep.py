@@ -99,12 +99,25 @@ _RETRIES = 4
 _FOLD_TANGENT = 50.0
 
 
+#: Largest step between anchors relative to the slope: below `ANCHOR_STEP / _ANCHOR_REL`
+#: (1 degree) the anchors go down geometrically, as the gaits change ever faster
+#: toward zero slope.
+_ANCHOR_REL = 0.1
+
+
 def _anchor_grid(start, stop, step):
-    """Slopes from `start` to `stop` (either direction) in equal steps of at most `step`."""
+    """Slopes from `start` to `stop` (either direction) in equal steps of at most `step`;
+    downward below `step / _ANCHOR_REL`, in steps of at most `_ANCHOR_REL` times the
+    lower slope (geometric)."""
     import numpy as np
 
-    n = max(1, int(np.ceil(abs(stop - start) / step - 1e-9)))
-    return np.linspace(start, stop, n + 1)
+    knee = stop if stop >= start else max(stop, min(start, step / _ANCHOR_REL))
+    n = max(1, int(np.ceil(abs(knee - start) / step - 1e-9)))
+    grid = np.linspace(start, knee, n + 1)
+    if stop < knee:
+        m = max(1, int(np.ceil(np.log(knee / stop) / np.log1p(_ANCHOR_REL) - 1e-9)))
+        grid = np.concatenate([grid, np.geomspace(knee, stop, m + 1)[1:]])
+    return grid
 
 
 def _hermite(ps, pa, za, ta):
