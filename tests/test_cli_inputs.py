@@ -238,3 +238,18 @@ def test_ctrl_c_stops_reproduce_at_once(tmp_path):
     assert stderr.strip().splitlines() == ["vhcjax reproduce: interrupted"], stderr
     # nothing at all: no report, no figure, no partial file or hidden work folder
     assert (os.listdir(out) if out.exists() else []) == []
+
+
+def test_a_model_flag_given_at_another_models_default_is_not_ignored():
+    from vhcjax.cli._common import CLIError, walker_from_args
+
+    def walker(*argv):
+        return walker_from_args(build_parser().parse_args(["simulate", *argv]))
+
+    assert float(walker("--model", "kneed", "--mass-hip", "10").mh) == 10.0
+    assert float(walker("--model", "kneed", "--gravity", "9.81").g) == 9.81
+    assert float(walker("--model", "kneed").mh) == 0.5  # its own default
+    assert float(walker().mH) == 10.0 and float(walker("--mass-hip", "3").mH) == 3.0
+    for flag, value in (("--mass-leg", "5"), ("--a", "0.5"), ("--b", "0.5")):
+        with pytest.raises(CLIError, match=flag):
+            walker("--model", "kneed", flag, value)

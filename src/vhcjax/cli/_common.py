@@ -162,7 +162,9 @@ def add_model_choice(parser):
         help="compass gait (thesis) or passive kneed walker (Hsu Chen 2007 "
         "parameters; --mass-hip defaults to 0.5 kg for it) (default %(default)s)",
     )
-    for action in parser._actions:  # --slope-deg: each model's default (`walker_from_args`)
+    for action in parser._actions:  # each model's defaults (`walker_from_args`)
+        if action.dest in _COMPASS_DEFAULTS:
+            action.default = None  # given or not, whatever the value
         if action.dest == "slope_deg":
             action.default = None
             action.help = (
@@ -184,7 +186,7 @@ def kneed_from_args(args, slope_deg):
         ("gravity", "--gravity", "g", ""),
     ):
         v = getattr(args, dest, None)
-        if v is None or (dest in ("mass_hip", "gravity") and v == _COMPASS_DEFAULTS[dest]):
+        if v is None:
             continue
         check_finite(flag, v)
         if v <= 0:
@@ -194,8 +196,11 @@ def kneed_from_args(args, slope_deg):
     return KneedWalker(psi=math.radians(slope_deg), **values)
 
 
-_COMPASS_DEFAULTS = {"mass_hip": 10.0, "gravity": 9.81}
-_COMPASS_ONLY = (("mass_leg", "--mass-leg", 5.0), ("a", "--a", 0.5), ("b", "--b", 0.5))
+#: The compass gait's flags and their defaults (thesis Table 1). With `--model` they
+#: parse to `None` when not given, and `walker_from_args` sets the defaults.
+_COMPASS_DEFAULTS = {"mass_hip": 10.0, "mass_leg": 5.0, "a": 0.5, "b": 0.5, "gravity": 9.81}
+#: Flags of the compass gait alone (refused with `--model kneed`).
+_COMPASS_ONLY = (("mass_leg", "--mass-leg"), ("a", "--a"), ("b", "--b"))
 
 
 def walker_from_args(args, slope_deg=None):
@@ -206,12 +211,15 @@ def walker_from_args(args, slope_deg=None):
         args.slope_deg = KNEED_SLOPE_DEG if kneed else 3.0
     slope = args.slope_deg if slope_deg is None else slope_deg
     if kneed:
-        for dest, flag, default in _COMPASS_ONLY:
-            if getattr(args, dest) != default:
+        for dest, flag in _COMPASS_ONLY:
+            if getattr(args, dest) is not None:
                 raise CLIError(f"{flag} is a compass-gait parameter: not with --model kneed")
         if getattr(args, "family", None) is not None:
             raise CLIError("--family is a compass-gait flag: the kneed walker has one family")
         return kneed_from_args(args, slope)
+    for dest, default in _COMPASS_DEFAULTS.items():
+        if getattr(args, dest, None) is None:
+            setattr(args, dest, default)
     if hasattr(args, "family") and args.family is None:
         args.family = "stable"
     for dest, flag, _, _ in KNEED_FLAGS:
@@ -265,7 +273,7 @@ def describe(args, slope_deg=None):
         extra = (("mass_hip", "--mass-hip", "", ""), ("gravity", "--gravity", "", ""))
         for dest, flag, _, _ in KNEED_FLAGS + extra:
             v = getattr(args, dest, None)
-            if v is not None and v != _COMPASS_DEFAULTS.get(dest):
+            if v is not None:
                 parts.append(f"{flag[2:]} {v:g}")
         return ", ".join(parts)
     for flag, default, label in (
