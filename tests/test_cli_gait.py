@@ -140,3 +140,15 @@ def test_sweep_csv_png(tmp_path, capsys):
     np.testing.assert_allclose(float(r3["a"]), 0.204676, atol=6e-7)  # thesis (7.9)
     assert png_path.stat().st_size > 10_000
     assert "found at 3 of 3" in capsys.readouterr().out
+    # the same sweep as JSON carries the same stability columns (same programs)
+    args = ["sweep", "--slope-deg", "2.5:3.5:0.5", "--family", "both", "--transverse"]
+    assert main([*args, "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    for r in rows:
+        j = out["families"][r["family"]]["rows"][[2.5, 3.0, 3.5].index(float(r["slope_deg"]))]
+        for key in ("mult1_re", "pmult1_re", "max_abs_multiplier"):
+            assert j[key] == pytest.approx(float(r[key]), abs=1e-12)
+        assert str(j["stable"]) == r["stable"]
+    # without an output that shows multipliers, --transverse is refused, not ignored
+    assert main(args) == 2
+    assert "--transverse" in capsys.readouterr().err

@@ -289,6 +289,11 @@ def sweep_rows(gaits, slopes_deg):
     return rows
 
 
+def _nulls(row):
+    """A sweep row for JSON: the empty stability columns of a failed gait as `null`."""
+    return {k: (None if v == "" else v) for k, v in row.items()}
+
+
 def run_sweep(args):
     from ..gait import sweep
 
@@ -298,6 +303,9 @@ def run_sweep(args):
     model = model_from_args(args, slope_deg=slopes[0])
     check_output_file(args.csv, "--csv")
     check_output_file(args.png, "--png")
+    stability = bool(args.csv or args.json)  # the outputs that show multipliers
+    if args.transverse and not stability:
+        raise CLIError("--transverse adds multipliers to the --csv or --json output: give one")
     families = ("stable", "unstable") if args.family == "both" else (args.family,)
     from .._batching import report_progress
 
@@ -319,7 +327,7 @@ def run_sweep(args):
             bar.set_description(f"sweep {fam}")
             results[fam] = sweep(model, psis, fam, args.method, tangents=False)
             rows[fam] = sweep_rows(results[fam].gaits, slopes)
-            if args.csv:  # multipliers of every gait in one batched call
+            if stability:  # multipliers of every gait in one batched call
                 from ._multiplier_fields import add_stability_columns
 
                 stage["name"] = ""  # the next chunk starts the multipliers' count
@@ -353,7 +361,10 @@ def run_sweep(args):
         print_json(
             {
                 "method": args.method,
-                "families": {fam: {**summary[fam], "rows": rows[fam]} for fam in families},
+                "families": {
+                    fam: {**summary[fam], "rows": [_nulls(r) for r in rows[fam]]}
+                    for fam in families
+                },
             }
         )
     else:
