@@ -256,3 +256,31 @@ def test_period1_family_is_the_poincare_fixed_point_at_every_slope(gaits3):
     assert vhcjax.result_names(fam.result) == ["successful", "bad_input", "bad_input"]
     np.testing.assert_allclose(np.asarray(fam.z)[0], ref["stable"][0], atol=1e-10)
     assert np.isfinite(np.asarray(fam.z)).all() and np.isfinite(np.asarray(fam.periods)).all()
+
+
+def test_multipliers_only_of_a_gait_of_a_valid_model(gaits3):
+    m, g = gaits3
+    z = g["stable"][0]
+    out = vhcjax.gait_multipliers(m, z + 0.02)  # one step moves it: not a gait
+    assert vhcjax.result_names(out.result) == "not_a_gait" and not bool(out.stable)
+    assert vhcjax.result_names(vhcjax.gait_multipliers(m, z).result) == "successful"
+    bad = vhcjax.gait_multipliers(CompassGait(mH=-1.0), z, transverse=False)
+    assert vhcjax.result_names(bad.result) == "bad_input" and not bool(bad.stable)
+    with pytest.raises(ValueError, match="3 section coordinates"):
+        vhcjax.gait_multipliers(m, m.section_to_state(jnp.asarray(z)))
+
+
+def test_library_inputs_refused_with_the_shape_or_range_expected():
+    m = CompassGait()
+    for guess in ([0.2, -1.0, 0.1, 0.2, 0.3], [0.2]):
+        with pytest.raises(ValueError, match=r"\(2,\) or \(3,\)"):
+            vhcjax.find_gait(m, guess=guess, throw=False)
+    with pytest.raises(ValueError, match=r"\(B, 2\) or \(B, 3\)"):
+        vhcjax.find_gaits(m, np.zeros((3, 5)))
+    for mu, beta in (([-1.0, 2.0], [1.0]), ([2.0], [np.nan])):
+        with pytest.raises(ValueError, match="finite positive"):
+            vhcjax.atlas(mu, beta)
+    with pytest.raises(ValueError, match="outside the bounds"):
+        vhcjax.design("speed", ["mass-hip"], model=CompassGait(mH=100.0))
+    with pytest.raises(ValueError, match="non-positive"):
+        vhcjax.design("speed", ["mass-hip"], model=CompassGait(mH=-1.0))

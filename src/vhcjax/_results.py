@@ -50,6 +50,10 @@ class RESULTS(eqx.Enumeration):
     not_requested = (
         "The transverse linearization was not asked for; the Poincare-map Jacobian decides."
     )
+    not_a_gait = (
+        "The state is not a period-1 gait: one step moves it by more than 1e-6 on the "
+        "section, so its Jacobian's eigenvalues are not Floquet multipliers."
+    )
 
 
 def result_names(result) -> list[str] | str:

@@ -156,6 +156,7 @@ def stabilize(
     code = system.result
     for c in (ric.result, ric2.result):
         code = RESULTS.where(code == RESULTS.successful, c, code)
+    code = RESULTS.where(model.validate(), code, RESULTS.bad_input)
     return Stabilization(
         system,
         ric,

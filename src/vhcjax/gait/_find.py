@@ -42,6 +42,7 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
         gait = continue_to_model(model, family, method)
     else:
         guess = detach(jnp.asarray(guess, dtype=float))
+        _check_guess_shape(guess.shape, (), "guess")
         gait = _search_one_jit(model, guess, family_sign(family), method, solver)
         gait = _relabel(gait, family)
     gait = _clean_failed(gait, guess)
@@ -66,6 +67,14 @@ _MIN_SPLIT = 8
 
 
 _search_one_jit = stored_jit(_search)
+
+
+def _check_guess_shape(shape, batch, name):
+    """A guess is $(a_0, b_0)$ or $(a_0, b_0, f_0)$ (with a leading batch axis for
+    `find_gaits`): any other shape is a `ValueError` naming the shapes expected."""
+    if len(shape) != len(batch) + 1 or shape[-1] not in (2, 3):
+        want = " or ".join(str((*batch, k)).replace("'", "") for k in (2, 3))
+        raise ValueError(f"{name} must have shape {want}: (a0, b0) or (a0, b0, f0); got {shape}")
 
 
 def _chunk_size(B, workers, mesh):
@@ -175,6 +184,7 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord):
     ]
     if guesses is not None:
         guesses = jnp.atleast_2d(jnp.asarray(guesses, dtype=float))
+        _check_guess_shape(guesses.shape, ("B",), "guesses")
         sizes.append(guesses.shape[0])
     if not sizes:
         raise ValueError("find_gaits needs a batch: guesses, psi or batched model parameters")

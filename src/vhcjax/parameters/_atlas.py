@@ -121,6 +121,9 @@ def atlas(
     """
     mu = np.atleast_1d(np.asarray(mass_ratio, float))
     beta = np.atleast_1d(np.asarray(length_ratio, float))
+    for name, v in (("mass_ratio", mu), ("length_ratio", beta)):
+        if v.ndim != 1 or not (np.isfinite(v).all() and (v > 0).all()):
+            raise ValueError(f"atlas: {name} must be a 1-d array of finite positive numbers")
     MU, BETA = np.meshgrid(mu, beta, indexing="ij")
     model = grid_model(
         MU.ravel(),

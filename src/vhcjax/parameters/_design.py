@@ -171,8 +171,18 @@ def design(
     if not (lo < hi).all():
         raise ValueError(f"every bound needs lo < hi, got {bounds}")
     sense = _SENSE[objective]
+    if not bool(base.validate()):
+        raise ValueError("design: the starting model has a non-positive or non-finite parameter")
     x = np.array([parameters_of(base)[k] for k in vary])
-    x = np.clip(x, lo, hi)
+    outside = [
+        f"{k} = {v:g} not in [{a:g}, {b:g}]"
+        for k, v, a, b in zip(vary, x, lo, hi)
+        if not a <= v <= b
+    ]
+    if outside:
+        raise ValueError(
+            "design: the starting parameters lie outside the bounds: " + "; ".join(outside)
+        )
     g0 = find_gait(with_parameters(base, vary, x), method="shooting", throw=False)
     if g0.result != RESULTS.successful:
         raise ValueError(f"no stable gait at the starting parameters: {result_names(g0.result)}")

@@ -72,8 +72,9 @@ class GaitMultipliers(eqx.Module):
       transverse linearization holds the two agree to 1e-6).
     - `stable`: `max_abs < 1`.
     - `period`, `x_minus`: from the hybrid step.
-    - `result`: `successful`, or the failure of the hybrid step, or `nonfinite` where
-      the Poincare Jacobian is not finite.
+    - `result`: `successful`, or the failure of the hybrid step, `nonfinite` where the
+      Poincare Jacobian is not finite, `not_a_gait` where one step moves `z` by more
+      than `GAIT_TOL` (no fixed point: no multipliers), `bad_input` for an invalid model.
     - `transverse_result`: `successful`, or why the transverse multipliers are not to be
       trusted: the failure of its integration (`no_impact`, `max_steps_reached`,
       `nonfinite`), `phase_not_monotone` ($\\dot q_1$ changes sign along the orbit:
@@ -158,6 +159,12 @@ def _transverse_checks(model, x0, sr, tl, pm, config):
     return code, disagreement, condition
 
 
+#: How far (section coordinates, relative to max(1, |z|)) one step may move a state for
+#: it to count as a period-1 gait in `gait_multipliers`: gaits found by the searches
+#: close to about 1e-10.
+GAIT_TOL = 1e-6
+
+
 def _gait_multipliers(model, z, config=DEFAULT_CONFIG, transverse=True):
     """Both multiplier computations at the period-1 gait with section coordinates `z`,
     with the checks of the transverse one (`transverse=False`: the Poincare ones only)."""
@@ -171,11 +178,19 @@ def _gait_multipliers(model, z, config=DEFAULT_CONFIG, transverse=True):
     # the Jacobian of the step map (as `hybrid.jacobian`) with the step in the same pass
     J, sr = jax.jacfwd(step, has_aux=True)(z)
     pm = _sort(jnp.linalg.eigvals(J))
+    # multipliers are those of a fixed point of the step map only
+    moved = jnp.max(jnp.abs(model.state_to_section(sr.x_plus) - z))
+    periodic = moved <= GAIT_TOL * jnp.maximum(1.0, jnp.max(jnp.abs(z)))
     code = RESULTS.where(
         sr.result == RESULTS.successful,
-        RESULTS.where(jnp.all(jnp.isfinite(pm)), RESULTS.successful, RESULTS.nonfinite),
+        RESULTS.where(
+            jnp.all(jnp.isfinite(pm)),
+            RESULTS.where(periodic, RESULTS.successful, RESULTS.not_a_gait),
+            RESULTS.nonfinite,
+        ),
         sr.result,
     )
+    code = RESULTS.where(model.validate(), code, RESULTS.bad_input)
     ok = code == RESULTS.successful
     if not transverse:
         pm = jnp.where(ok, pm, 0.0)
@@ -244,6 +259,12 @@ def gait_multipliers(model, z, config=DEFAULT_CONFIG, *, transverse=True):
     Runs as a batch of one of `family_multipliers` (same compiled program) when the
     model has a slope `psi`; otherwise, or under a JAX transformation, on its own.
     """
+    n = 2 * model.n_dof - 1
+    if np.shape(z)[-1:] != (n,):
+        raise ValueError(
+            f"gait_multipliers: z must be the {n} section coordinates "
+            f"(model.state_to_section of the post-impact state), got shape {np.shape(z)}"
+        )
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((model, z)))
     if traced or not hasattr(model, "psi"):
         return _gait_multipliers_jit(model, z, config, transverse)
