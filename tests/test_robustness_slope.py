@@ -3,6 +3,7 @@ gaits; floor-step terrain: the gait sensitivity norm from the linearized step-to
 vs simulated step times, and the largest survivable step up/down bracketed by simulation."""
 
 import ast
+import json
 import os
 import subprocess
 import sys
@@ -109,3 +110,15 @@ def test_floor_step_recovery_compiles_without_xla_noise():
     labels = ast.literal_eval(out.stdout.strip())  # 5 steps: the step down is undecided
     assert len(labels) == 2 and set(labels) <= {"converged", "fell", "undecided"}
     assert "circular simplification" not in out.stderr, out.stderr[-2000:]
+
+
+def test_cli_says_when_the_step_budget_decides_the_threshold(capsys):
+    from vhcjax.cli import main
+
+    argv = ["slope-sensitivity", "--no-derivatives", "--steps", "5", "--heights-mm", "-5", "5"]
+    assert main([*argv, "--json", "--quiet"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    # 5 steps are too few to return within 1e-4 of the gait after all but the tiniest
+    # floor steps: the thresholds (well below 1 mm) measure the budget, and it says so
+    assert out["max_step_down_m"][1] < 1e-3 and out["max_step_up_m"][1] < 1e-3
+    assert "raise --steps" in out["max_step_reason"]

@@ -16,6 +16,7 @@ from ._common import (
     print_json,
     progress,
     walker_from_args,
+    warn,
 )
 
 STABLE_SEED = (0.2186688, -1.09238359, -0.37737395)  # stable 3-degree gait (Newton seed)
@@ -364,7 +365,8 @@ def run_slope(args):
     import jax.numpy as jnp
     import numpy as np
 
-    from ..robustness import gait_sensitivity_norm, max_floor_step, terrain_recovery
+    from ..hybrid import FAST_CONFIG
+    from ..robustness import UNDECIDED, gait_sensitivity_norm, max_floor_step, terrain_recovery
 
     check_output_file(args.png, "--png")
     if args.png:
@@ -394,6 +396,22 @@ def run_slope(args):
     th = max_floor_step(model, x_star, num_steps=args.steps, progress=_bar(args))
     out["max_step_down_m"] = [th.lo[0], th.hi[0]]
     out["max_step_up_m"] = [th.lo[1], th.hi[1]]
+    # A first failing step that did not fall was too slow to recover within --steps: the
+    # threshold then measures the step budget, not the walker; say so.
+    fails = jnp.asarray([-float(th.hi[0]), float(th.hi[1])])
+    first = terrain_recovery(model, x_star, fails, args.steps, 1e-4, FAST_CONFIG)
+    slow = [
+        name
+        for name, lab, hi in zip(("down", "up"), np.asarray(first.label), th.hi)
+        if lab == UNDECIDED and hi < 0.05
+    ]
+    if slow:
+        reason = (
+            f"the first failing step {' and '.join(slow)} neither fell nor returned to the "
+            f"gait within --steps {args.steps}: raise --steps to measure the walker"
+        )
+        out["max_step_reason"] = reason
+        warn(args, reason)
     hs = jnp.asarray(np.asarray(args.heights_mm) / 1000.0)
     rec = terrain_recovery(model, x_star, hs, args.steps, 1e-4)
     out["recovery"] = {"heights_m": hs, "label": rec.label, "steps": rec.steps}
