@@ -91,7 +91,13 @@ def test_stabilize_json_and_png(tmp_path, capsys):
 
 
 def test_without_basin_the_fractions_are_null_with_a_reason(capsys):
-    assert cli.main(["stabilize", "--steps", "30", "--json"]) == 0
+    argv = ["stabilize", "--steps", "30", "--perturbation", "1.0", "--json"]
+    assert cli.main(argv) == 0
     out = json.loads(capsys.readouterr().out, parse_constant=_no_constants)
     assert out["basin"]["passive_fraction"] is None
     assert out["basin"]["closed_loop_fraction"] is None and out["basin"]["reason"]
+    # so far off the gait both walkers fall at once: no final error, and why
+    sim = out["simulation"]
+    assert sim["result"] == "fell" and sim["steps_completed"] == 0
+    assert sim["final_error"] is None and sim["final_error_reason"].startswith("fell after 0")
+    assert sim["passive_final_error"] is None and sim["passive_final_error_reason"]

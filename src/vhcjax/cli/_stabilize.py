@@ -202,6 +202,18 @@ def run_stabilize(args):
         "passive_result": result_names(passive.result),
         "passive_final_error": float(err_p[-1]),
     }
+    # a run that failed has no final error: say where it stopped instead
+    for key, run, res in (
+        ("final_error", sim, "result"),
+        ("passive_final_error", passive, "passive_result"),
+    ):
+        done = int(run.num_successful)
+        if done < args.steps:
+            out["simulation"][key] = None
+            out["simulation"][key + "_reason"] = (
+                f"{out['simulation'][res]} after {done} of {args.steps} steps; "
+                + ("x_final is the last state reached" if key == "final_error" else "")
+            ).rstrip("; ")
     basin_plot = None
     if args.basin:
         kw = {
@@ -274,10 +286,15 @@ def run_stabilize(args):
             f"{float(st.max_gain):.4g}; stable: {stable}"
         )
         s = out["simulation"]
+
+        def end(key):
+            if s[key] is None:
+                return s[key + "_reason"].split(";")[0]
+            return f"error after {args.steps} steps {s[key]:.3e}"
+
         print(
-            f"from +{args.perturbation:g}: error after {args.steps} steps "
-            f"{s['final_error']:.3e} with feedback (max torque {s['max_abs_torque']:.4g} N m), "
-            f"{s['passive_final_error']:.3e} passive"
+            f"from +{args.perturbation:g}: {end('final_error')} with feedback (max torque "
+            f"{s['max_abs_torque']:.4g} N m); {end('passive_final_error')} passive"
         )
         if args.basin:
             b = out["basin"]
