@@ -143,6 +143,7 @@ def test_period_two_gait_is_a_fixed_point_of_two_simulator_steps(flip):
         ["bifurcation", "--slope-deg", "0:2:0.5"],
         ["bifurcation", "--slope-deg", "1:2:0.5", "--record", "0"],
         ["bifurcation", "--slope-deg", "1:2:0.5", "--mass-hip", "-1"],
+        ["bifurcation", "--slope-deg", "0.01:29:0.0003", "--record", "10000"],
         ["multipliers", "--slope-deg", "45"],
     ],
 )

@@ -173,6 +173,10 @@ def run_multipliers(args):
     return 0
 
 
+#: Largest number of recorded step periods (slopes x --record) one run keeps (160 MB).
+MAX_RECORDED = 20_000_000
+
+
 def run_bifurcation(args):
     import numpy as np
 
@@ -182,6 +186,11 @@ def run_bifurcation(args):
     slopes = parse_range(args.slope_deg)
     for s in slopes:
         check_slope_deg(s)
+    if len(slopes) * args.record > MAX_RECORDED:
+        raise CLIError(
+            f"{len(slopes)} slopes x --record {args.record} is {len(slopes) * args.record:,} "
+            f"recorded periods; at most {MAX_RECORDED:,} (fewer slopes or a shorter --record)"
+        )
     model = model_from_args(args, slope_deg=slopes[0])
     for flag in ("csv", "png", "png_multipliers"):
         check_output_file(getattr(args, flag), "--" + flag.replace("_", "-"))
