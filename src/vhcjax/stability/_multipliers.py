@@ -259,7 +259,8 @@ def gait_multipliers(model, z, config=DEFAULT_CONFIG, *, transverse=True):
     Runs as a batch of one of `family_multipliers` (same compiled program) when the
     model has a slope `psi`; otherwise, or under a JAX transformation, on its own.
     """
-    n = 2 * model.n_dof - 1
+    x = jax.ShapeDtypeStruct((2 * model.n_dof,), jnp.float64)
+    n = jax.eval_shape(model.state_to_section, x).shape[0]  # 2n - 1 for a compass gait
     if np.shape(z)[-1:] != (n,):
         raise ValueError(
             f"gait_multipliers: z must be the {n} section coordinates "
