@@ -130,3 +130,16 @@ def test_cli_rejects_bad_input(argv, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert err.startswith(f"vhcjax {argv[0]}: error:") and err.count("\n") == 1
+
+
+def test_basin_slice_refuses_a_grid_it_cannot_draw():
+    z = np.array([0.2187, -1.0924, -0.3774])
+    for kw in (
+        {"half_widths": (-0.1, 0.4)},
+        {"half_widths": (0.1, float("nan"))},
+        {"shape": (0, 5)},
+        {"axes": (1, 1)},
+        {"axes": (0, 3)},
+    ):
+        with pytest.raises(ValueError, match="basin_slice"):
+            vj.basin_slice(vj.CompassGait(), z, **kw)

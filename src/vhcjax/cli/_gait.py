@@ -376,4 +376,5 @@ def run_sweep(args):
                     f"  ends near {e['last_slope_deg']:.4g} deg (next: {e['slope_deg']:.4g} "
                     f"deg): {e['reason']}"
                 )
-    return 0
+    # exit 1 (the computation failed) only where no gait was found at all
+    return 0 if any(s["found"] for s in summary.values()) else 1

@@ -159,6 +159,15 @@ def basin_slice(
     """
     z_star = np.asarray(z_star, dtype=float)
     nx, ny = shape
+    hw = np.asarray(half_widths, float)
+    if hw.shape != (2,) or not (np.isfinite(hw).all() and (hw > 0).all()):
+        raise ValueError(
+            f"basin_slice: half_widths must be two finite positive numbers, got {half_widths}"
+        )
+    if int(nx) < 1 or int(ny) < 1:
+        raise ValueError(f"basin_slice: shape must be two positive integers, got {shape}")
+    if len(set(axes)) != 2 or not all(0 <= a < z_star.shape[0] for a in axes):
+        raise ValueError(f"basin_slice: axes must be two distinct section coordinates, got {axes}")
     ox = np.linspace(-half_widths[0], half_widths[0], nx)
     oy = np.linspace(-half_widths[1], half_widths[1], ny)
     gx, gy = np.meshgrid(ox, oy)  # (ny, nx)
