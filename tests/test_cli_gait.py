@@ -107,7 +107,7 @@ def test_sweep_csv_png(tmp_path, capsys):
     assert rc == 0
     rows = list(csv.DictReader(open(csv_path)))
     assert len(rows) == 6
-    # the columns, in order, then the stability columns
+    # the gait columns, in order, then the stability columns
     assert list(rows[0])[1:15] == [
         "slope_deg",
         "result",

@@ -153,6 +153,8 @@ def test_cli_bad_input_is_one_line_error(argv, capsys):
     assert main(argv) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "error" in err[0]
+    if "--record" in argv and "10000" in argv:  # refused for its size, not its range
+        assert "recorded periods" in err[0]
 
 
 @pytest.mark.slow

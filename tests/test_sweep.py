@@ -7,6 +7,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import vhcjax as vj
 from vhcjax.gait import _sweep
@@ -52,6 +53,19 @@ def test_tiny_slopes_are_found():
     for i in (0, 1):  # the homotopy straight from the reference gait, no sweep
         g = vj.find_gait(vj.CompassGait(psi=math.radians(deg[i])), "stable")
         np.testing.assert_allclose(np.asarray(sw.gaits.x_plus[i]), np.asarray(g.x_plus), atol=1e-10)
+
+
+def test_anchor_grid_and_smallest_slope():
+    one, step = math.radians(1.0), _sweep.ANCHOR_STEP
+    grid = _sweep._anchor_grid(math.radians(3.0), math.radians(0.01), step)
+    d = -np.diff(grid)
+    assert np.all(d > 0) and np.all(d <= step * (1 + 1e-12))
+    below = grid[1:] < one - 1e-12
+    assert np.all(d[below] <= 0.1 * grid[1:][below] * (1 + 1e-9))  # geometric below 1 deg
+    coarse = _sweep._anchor_grid(math.radians(3.0), math.radians(0.5), math.radians(0.5))
+    assert len(np.unique(coarse)) == len(coarse)  # no repeated anchor
+    with pytest.raises(ValueError, match="below"):
+        vj.sweep(vj.CompassGait(), [1e-320, 0.05])
 
 
 def test_real_ends_are_reported_with_their_cause():

@@ -51,8 +51,9 @@ class RESULTS(eqx.Enumeration):
         "The transverse linearization was not asked for; the Poincare-map Jacobian decides."
     )
     not_a_gait = (
-        "The state is not a period-1 gait: one step moves it by more than 1e-6 on the "
-        "section, so its Jacobian's eigenvalues are not Floquet multipliers."
+        "The state is not a period-1 gait: one step moves it on the section by more than "
+        "1e-6 relative to max(1, |z|), so its Jacobian's eigenvalues are not Floquet "
+        "multipliers."
     )
 
 

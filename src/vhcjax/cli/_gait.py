@@ -295,11 +295,15 @@ def _nulls(row):
 
 
 def run_sweep(args):
-    from ..gait import sweep
+    from ..gait import MIN_SLOPE, sweep
 
     slopes = parse_range(args.slope_deg)
     for v in slopes:
         check_slope_deg(v)
+        if v < math.degrees(MIN_SLOPE):
+            raise CLIError(
+                f"--slope-deg: slopes below {math.degrees(MIN_SLOPE):.3g} deg are not solved"
+            )
     model = model_from_args(args, slope_deg=slopes[0])
     check_output_file(args.csv, "--csv")
     check_output_file(args.png, "--png")

@@ -38,6 +38,7 @@ from ._shooting import (
     shooting_search as shooting_search,
 )
 from ._sweep import (
+    MIN_SLOPE as MIN_SLOPE,
     Sweep as Sweep,
     sweep as sweep,
 )

@@ -99,23 +99,27 @@ _RETRIES = 4
 _FOLD_TANGENT = 50.0
 
 
-#: Largest step between anchors relative to the slope: below `ANCHOR_STEP / _ANCHOR_REL`
-#: (1 degree) the anchors go down geometrically, as the gaits change ever faster
-#: toward zero slope.
+#: Below this slope (1 degree) the anchors go down geometrically, in steps of at most
+#: `_ANCHOR_REL` of the slope (and at most the anchor step), as the gaits change ever
+#: faster toward zero slope.
+_ANCHOR_KNEE = math.radians(1.0)
 _ANCHOR_REL = 0.1
+#: Smallest slope a sweep solves (rad): the gaits shrink to nothing at zero slope.
+MIN_SLOPE = 1e-6
 
 
 def _anchor_grid(start, stop, step):
     """Slopes from `start` to `stop` (either direction) in equal steps of at most `step`;
-    downward below `step / _ANCHOR_REL`, in steps of at most `_ANCHOR_REL` times the
-    lower slope (geometric)."""
+    downward below `_ANCHOR_KNEE`, geometric steps of at most `_ANCHOR_REL` times the
+    slope and at most `step`."""
     import numpy as np
 
-    knee = stop if stop >= start else max(stop, min(start, step / _ANCHOR_REL))
+    knee = stop if stop >= start else max(stop, min(start, _ANCHOR_KNEE))
     n = max(1, int(np.ceil(abs(knee - start) / step - 1e-9)))
     grid = np.linspace(start, knee, n + 1)
     if stop < knee:
-        m = max(1, int(np.ceil(np.log(knee / stop) / np.log1p(_ANCHOR_REL) - 1e-9)))
+        m = max(np.log(knee / stop) / np.log1p(_ANCHOR_REL), (knee - stop) / step)
+        m = max(1, int(np.ceil(m - 1e-9)))
         grid = np.concatenate([grid, np.geomspace(knee, stop, m + 1)[1:]])
     return grid
 
@@ -191,6 +195,8 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
         raise ValueError("sweep needs at least one slope")
     if not np.all(np.isfinite(psi)) or np.any(psi <= 0):
         raise ValueError("sweep: slopes must be finite and positive (rad)")
+    if np.any(psi < MIN_SLOPE):
+        raise ValueError(f"sweep: slopes below {MIN_SLOPE:g} rad are not solved")
     order = np.argsort(psi, kind="stable")
     ps = psi[order]
     sign = family_sign(family)

@@ -147,7 +147,7 @@ def basin_slice(
     - `axes`: the two perturbed coordinates, e.g. `(0, 1)` for $(q_1, \\dot q_1)$.
     - `half_widths`: the grid spans `z_star[axes[i]] +- half_widths[i]`. Grids with an
       odd number of points contain the gait itself.
-    - `shape`: grid points along each axis (the issue asks for at least 200 x 200).
+    - `shape`: grid points along each axis (200 x 200 by default).
     - `num_steps`: steps simulated per point (at most).
     - `tol`: converged when the post-impact state is within `tol` ($\\infty$-norm) of the
       gait.

@@ -210,7 +210,7 @@ def _gait_multipliers(model, z, config=DEFAULT_CONFIG, transverse=True):
     tl = jax.tree_util.tree_map(
         lambda x: jnp.where(broke & ~jnp.isfinite(x), 0.0, x) if eqx.is_inexact_array(x) else x, tl
     )
-    tr = tl.multipliers
+    tr = jnp.where(ok, tl.multipliers, 0.0)  # no multipliers where there is no gait
     return GaitMultipliers(
         tr, pm, mx, ok & (mx < 1.0), sr.period, sr.x_minus, code, tcode, disagreement, condition, tl
     )
@@ -404,13 +404,14 @@ def period1_family(
 
     `seed`, `seed_psi` and `config` are accepted for old calls and ignored (a warning):
     the sweep needs no seed and solves every gait to 1e-12. A slope that is not finite
-    and positive gets the code `bad_input`; another model than a compass gait raises
+    and positive (at least `vhcjax.gait.MIN_SLOPE`, 1e-6 rad) gets the code `bad_input`;
+    another model than a compass gait raises
     `TypeError`.
 
     **Returns:** a `Family`; `z` holds the section coordinates $(q_1, \\dot q_1,
     \\dot q_2)$ after impact, `periods` the step periods, `result` the code per slope.
     """
-    from ..gait import sweep
+    from ..gait import MIN_SLOPE, sweep
 
     model = CompassGait() if model is None else model
     if not isinstance(model, CompassGait):
@@ -427,8 +428,9 @@ def period1_family(
             stacklevel=2,
         )
     psis = np.atleast_1d(np.asarray(psis, float))
-    # a slope that is not finite and positive (downhill) is `bad_input`, the rest is solved
-    valid = np.isfinite(psis) & (psis > 0)
+    # a slope that is not finite and positive (downhill), or below the sweep's smallest,
+    # is `bad_input`; the rest is solved
+    valid = np.isfinite(psis) & (psis >= MIN_SLOPE)
     z = np.zeros((len(psis), 2 * model.n_dof - 1))
     periods = np.zeros(len(psis))
     codes = np.full(len(psis), int(RESULTS.bad_input._value), dtype=np.int32)
