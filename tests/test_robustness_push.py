@@ -2,6 +2,8 @@
 the simulation equals the transverse linearization with an input term and central finite
 differences of pushed simulations; the largest survivable push is bracketed by simulation."""
 
+import json
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -71,3 +73,14 @@ def test_max_push_brackets():
             ok = vj.result_names(sr.result) == "successful"
             assert (ok and returns_to(long_walk(model, sr.x_plus), x_star)) == expect
     assert res.largest.shape == (2, 2)
+
+
+def test_cli_says_when_the_step_budget_decides_the_largest_push(capsys):
+    from vhcjax.cli import main
+
+    assert main(["push", "--phases", "2", "--steps", "3", "--json", "--quiet"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    # 3 steps are too few to come back within 1e-4 of the gait after any real push: every
+    # first failing push is undecided, and the command says the budget decides
+    assert max(max(row) for row in out["largest"]) < 1.0  # N s (0.89 at 30 steps)
+    assert "at 8 of 8" in out["largest_reason"] and "raise --steps" in out["largest_reason"]

@@ -448,7 +448,14 @@ def run_push(args):
     import jax.numpy as jnp
     import numpy as np
 
-    from ..robustness import max_push, push_sensitivity_autodiff, push_sensitivity_transverse
+    from ..hybrid import FAST_CONFIG
+    from ..robustness import (
+        UNDECIDED,
+        max_push,
+        push_recovery,
+        push_sensitivity_autodiff,
+        push_sensitivity_transverse,
+    )
 
     check_output_file(args.png, "--png")
     model, z, x_star, period, zn = _gait(args)
@@ -486,6 +493,31 @@ def run_push(args):
             "most_fragile_phase": res.most_fragile_phase,
         }
     )
+    # First failing pushes that neither fell nor recovered within --steps: there the
+    # threshold measures the step budget, not the walker; say so (as slope-sensitivity).
+    S, A = np.meshgrid(phases, angles, indexing="ij")
+    hi = np.asarray(res.threshold.hi, float)
+    first = push_recovery(
+        model,
+        x_star,
+        period,
+        jnp.asarray(S.ravel()),
+        jnp.asarray(A.ravel()),
+        jnp.asarray(hi),
+        args.steps,
+        1e-4,
+        args.duration,
+        FAST_CONFIG,
+    )
+    slow = int(np.sum((np.asarray(first.label) == UNDECIDED) & (hi < args.max)))
+    if slow:
+        reason = (
+            f"at {slow} of {hi.size} (phase, direction) pairs the first failing push neither "
+            f"fell nor returned to the gait within --steps {args.steps}: raise --steps to "
+            "measure the walker"
+        )
+        out["largest_reason"] = reason
+        warn(args, reason)
     if args.png:
         from ..plotting import plot_push
 
