@@ -253,3 +253,10 @@ def test_a_model_flag_given_at_another_models_default_is_not_ignored():
     for flag, value in (("--mass-leg", "5"), ("--a", "0.5"), ("--b", "0.5")):
         with pytest.raises(CLIError, match=flag):
             walker("--model", "kneed", flag, value)
+
+
+def test_no_gait_is_a_failed_computation_not_bad_input(capsys):
+    # valid flags, but no gait from the default seed at 29 degrees: exit 1, one line
+    assert main(["contraction", "--slope-deg", "29", "--quiet"]) == 1
+    err = capsys.readouterr().err.strip()
+    assert "no gait found" in err and "\n" not in err and "error" not in err

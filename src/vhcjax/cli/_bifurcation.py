@@ -6,6 +6,7 @@ import math
 from ._common import (
     KNEED_SEED,
     CLIError,
+    ComputationFailed,
     add_model_choice,
     add_model_flags,
     check_output_file,
@@ -129,7 +130,7 @@ def run_multipliers(args):
             if kneed
             else f"try --method {'shooting' if args.method == 'vhc' else 'vhc'}"
         )
-        raise CLIError(
+        raise ComputationFailed(
             f"no {'kneed-walker' if kneed else args.family} gait found at "
             f"{args.slope_deg} deg by {args.method} ({found}); {hint}"
         )
@@ -199,7 +200,7 @@ def run_bifurcation(args):
     fam = S.period1_family(psis, "stable", model=model)
     ok1 = np.array(result_names(fam.result)) == "successful"
     if not ok1.any():
-        raise CLIError(
+        raise ComputationFailed(
             "no stable period-1 gait found at any slope (continued from the "
             "default model's 3-degree gait); check the model flags"
         )

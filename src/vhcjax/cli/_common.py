@@ -15,6 +15,11 @@ class CLIError(Exception):
     """A user error: printed as one line, exit status 2."""
 
 
+class ComputationFailed(CLIError):
+    """The computation failed on valid input (e.g. no gait found): printed as one line,
+    exit status 1."""
+
+
 class ArgumentError(Exception):
     """An argparse error (unknown flag, bad value): printed as one line, exit status 2."""
 

@@ -11,7 +11,7 @@ import sys
 import threading
 
 from .._io import remove_pending
-from ._common import QUIET, ArgumentError, CLIError, Parser
+from ._common import QUIET, ArgumentError, CLIError, ComputationFailed, Parser
 
 # Subcommand modules, in the order they appear in `vhcjax --help`.
 SUBCOMMANDS = [
@@ -106,6 +106,9 @@ def main(argv=None):
         _first_run_note()
     try:
         return int(args.func(args) or 0)
+    except ComputationFailed as e:
+        print(f"vhcjax {args.command}: {e}", file=sys.stderr)
+        return 1
     except CLIError as e:
         print(f"vhcjax {args.command}: error: {e}", file=sys.stderr)
         return 2

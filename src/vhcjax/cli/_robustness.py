@@ -7,6 +7,7 @@ from ._common import (
     KNEED_SEED,
     POSITIVE,
     CLIError,
+    ComputationFailed,
     add_model_choice,
     add_model_flags,
     check_output_file,
@@ -57,7 +58,7 @@ def _gait(args):
         args.gait = list(KNEED_SEED if getattr(args, "model", "") == "kneed" else STABLE_SEED)
     fp = fixed_point_jit(model, jnp.asarray(args.gait, float))
     if result_names(fp.result) != "successful":
-        raise CLIError(
+        raise ComputationFailed(
             f"no gait found from --gait {args.gait} at slope {args.slope_deg} deg "
             f"({result_names(fp.result)}); give a better seed"
         )

@@ -5,6 +5,7 @@ import math
 from ._common import (
     POSITIVE,
     CLIError,
+    ComputationFailed,
     add_model_flags,
     check_finite,
     check_output_file,
@@ -152,7 +153,7 @@ def run_stabilize(args):
     psi = math.radians(args.slope_deg)
     fam = period1_family([psi], args.family, model=model)
     if result_names(fam.result)[0] != "successful":
-        raise CLIError(
+        raise ComputationFailed(
             f"no {args.family} period-1 gait found at {args.slope_deg} deg "
             f"({result_names(fam.result)[0]})"
         )
