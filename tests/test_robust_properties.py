@@ -184,3 +184,18 @@ def test_simulate_random_states_no_nan_documented_codes(x0):
     k = int(sim.num_successful)
     assert names[:k] == ["successful"] * k
     assert vj.result_names(sim.result) == ("successful" if k == 3 else names[k])
+
+
+def test_bisection_keeps_the_label_of_the_failure():
+    # survives below 1; fails by label 1 (fell) up to 2, by label 3 (undecided) beyond
+    def labels(m):
+        m = np.asarray(m)
+        return np.where(m < 1.0, 0, np.where(m < 2.0, 1, 3))
+
+    th = vj.bisect_threshold(labels, np.zeros(3), np.array([0.5, 1.5, 5.0]), iterations=30)
+    assert th.survives_max[0] and th.hi_label[0] == -1
+    assert abs(th.hi[1] - 1.0) < 1e-8 and th.hi_label[1] == 1
+    scan = vj.bisect_threshold(labels, np.zeros(1), np.full(1, 5.0), iterations=30, scan=9)
+    assert abs(scan.hi[0] - 1.0) < 1e-8 and scan.hi_label[0] == 1
+    plain = vj.bisect_threshold(lambda m: labels(m) == 0, np.zeros(1), np.ones(1) * 5.0)
+    assert plain.hi_label[0] == -1  # a boolean predicate has no labels

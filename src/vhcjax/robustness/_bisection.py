@@ -8,7 +8,9 @@ The set of surviving magnitudes need not be an interval (a walker may fall after
 medium push and survive a larger one). With `scan > 0`, each member is first evaluated at
 `scan` equally spaced magnitudes and the bisection starts from the first failure of that
 scan, so it finds the *first* threshold up to the scan resolution; with `scan = 0` it
-returns some boundary point.
+returns some boundary point. A predicate may return integer labels instead of booleans
+(0: survived, as `CONVERGED`); the label of the failure at `hi` is then kept, so that a
+caller can tell a fall from a recovery still under way when its step budget ran out.
 """
 
 import equinox as eqx
@@ -24,6 +26,8 @@ class Threshold(eqx.Module):
     - `bracketed`: `lo` survives and `hi` fails (both verified by simulation).
     - `survives_max`: the member survived even `hi_max` (threshold above the search range).
     - `fails_min`: the member failed even at `lo_min` (threshold below the search range).
+    - `hi_label`: the predicate's label at `hi` where it returns labels (why `hi` fails);
+      -1 where it returns booleans, or where `hi_max` survived.
     """
 
     lo: np.ndarray
@@ -31,6 +35,15 @@ class Threshold(eqx.Module):
     bracketed: np.ndarray
     survives_max: np.ndarray
     fails_min: np.ndarray
+    hi_label: np.ndarray
+
+
+def _evaluate(survives, magnitudes):
+    """(survived, label) of a predicate returning booleans (label -1) or labels (0 survives)."""
+    out = np.asarray(survives(jnp.asarray(magnitudes)))
+    if out.dtype == bool:
+        return out, np.full(out.shape, -1)
+    return out == 0, out.astype(int)
 
 
 def bisect_threshold(survives, lo_min, hi_max, *, iterations=20, scan=0, progress=None):
@@ -38,7 +51,8 @@ def bisect_threshold(survives, lo_min, hi_max, *, iterations=20, scan=0, progres
 
     **Arguments:**
 
-    - `survives`: callable, `(batch,) magnitudes -> (batch,) bool`.
+    - `survives`: callable, `(batch,) magnitudes -> (batch,) bool`, or `-> (batch,) int`
+      labels with 0 for survival (the failing label at `hi` is then kept).
     - `lo_min`, `hi_max`: arrays (batch,) or scalars; `lo_min` is expected to survive.
     - `iterations`: number of halvings (the bracket shrinks by `2**iterations`).
     - `scan`: number of interior magnitudes evaluated first (one batched call per
@@ -51,12 +65,12 @@ def bisect_threshold(survives, lo_min, hi_max, *, iterations=20, scan=0, progres
     hi = np.asarray(hi_max, dtype=float)
     lo, hi = np.broadcast_arrays(lo, hi)
     lo, hi = lo.copy(), hi.copy()
-    s_lo = np.asarray(survives(jnp.asarray(lo)))
-    s_hi = np.asarray(survives(jnp.asarray(hi)))
+    s_lo, _ = _evaluate(survives, lo)
+    s_hi, label = _evaluate(survives, hi)
     if scan > 0:
         fracs = np.arange(1, scan + 1) / (scan + 1)
         grid = lo[None] + fracs[:, None] * (hi - lo)[None]  # (scan, batch)
-        ok = np.stack([np.asarray(survives(jnp.asarray(g))) for g in grid])
+        ok, labels = (np.stack(a) for a in zip(*(_evaluate(survives, g) for g in grid)))
         fail = ~ok
         first = np.where(fail.any(axis=0), fail.argmax(axis=0), scan)  # index of first fail
         cols = np.arange(lo.shape[0])
@@ -65,16 +79,20 @@ def bisect_threshold(survives, lo_min, hi_max, *, iterations=20, scan=0, progres
         use = s_lo  # only members whose lower end survives
         hi = np.where(use, new_hi, hi)
         lo = np.where(use, new_lo, lo)
-        s_hi = np.where(use & (first < scan), False, s_hi)
+        found = use & (first < scan)
+        label = np.where(found, labels[np.minimum(first, scan - 1), cols], label)
+        s_hi = np.where(found, False, s_hi)
     rng = range(iterations)
     for _ in progress(rng) if progress is not None else rng:
         mid = 0.5 * (lo + hi)
-        s = np.asarray(survives(jnp.asarray(mid)))
+        s, lab = _evaluate(survives, mid)
         active = s_lo & ~s_hi
         lo = np.where(active & s, mid, lo)
         hi = np.where(active & ~s, mid, hi)
+        label = np.where(active & ~s, lab, label)
     survives_max = s_hi
     fails_min = ~s_lo
     hi_out = np.where(survives_max, np.inf, hi)
     lo_out = np.where(survives_max, hi, np.where(fails_min, np.nan, lo))
-    return Threshold(lo_out, hi_out, s_lo & ~s_hi, survives_max, fails_min)
+    label = np.where(survives_max, -1, label)
+    return Threshold(lo_out, hi_out, s_lo & ~s_hi, survives_max, fails_min, label)

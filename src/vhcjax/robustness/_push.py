@@ -32,7 +32,7 @@ from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, StepResult, classify_solve, flow
 from ._bisection import Threshold, bisect_threshold
-from ._recovery import CONVERGED, recover
+from ._recovery import recover
 
 
 def hip_jacobian(model, q):
@@ -296,11 +296,10 @@ def max_push(
     S, A = np.meshgrid(phases, angles, indexing="ij")
     s_flat, a_flat = jnp.asarray(S.ravel()), jnp.asarray(A.ravel())
 
-    def survives(mag):
-        rec = push_recovery(
+    def survives(mag):  # the recovery labels: CONVERGED (0) survives
+        return push_recovery(
             model, x_star, period, s_flat, a_flat, mag, num_steps, tol, duration, config
-        )
-        return rec.label == CONVERGED
+        ).label
 
     th = bisect_threshold(
         survives,

@@ -21,7 +21,7 @@ from .._programs import stored_jit
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, step_unchecked
 from ..models import CompassGait
 from ._bisection import bisect_threshold
-from ._recovery import CONVERGED, recover
+from ._recovery import recover
 
 
 class FloorStepCompassGait(CompassGait):
@@ -104,13 +104,13 @@ def max_floor_step(
     mm falls while 16.5-19.5 mm is survived).
 
     **Returns:** a `vhcjax.Threshold` with two members: step down (h < 0), step up (h > 0);
-    magnitudes are positive.
+    magnitudes are positive; `hi_label` is the recovery label of the first failing step
+    (`FELL`, or `UNDECIDED` where it had not come back within `num_steps`).
     """
     sign = jnp.array([-1.0, 1.0])
 
-    def survives(mag):
-        rec = terrain_recovery(model, x_star, sign * mag, num_steps, tol, config)
-        return rec.label == CONVERGED
+    def survives(mag):  # the recovery labels: CONVERGED (0) survives
+        return terrain_recovery(model, x_star, sign * mag, num_steps, tol, config).label
 
     return bisect_threshold(
         survives,
