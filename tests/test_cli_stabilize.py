@@ -25,7 +25,11 @@ from vhcjax import cli
         ["--steps", "0"],
         ["--basin-grid", "1"],
         ["--slope-deg", "nan"],
-        ["--model", "kneed"],
+        ["--model", "kneed", "--family", "stable"],
+        ["--model", "kneed", "--q", "1,1,1"],
+        ["--model", "kneed", "--r", "1,2,3"],
+        ["--r", "1,2"],
+        ["--model", "kneed", "--mass-leg", "5"],
     ],
 )
 def test_bad_input_is_one_line_exit_2(flags, capsys):

@@ -68,9 +68,11 @@ def test_input_enters_the_equations_of_motion(model):
     assert float(dq @ (B @ u)) == pytest.approx(2.5 * (0.4 + 1.1))
 
 
-def test_multidomain_models_are_refused():
+def test_multidomain_push_is_refused():
     with pytest.raises(NotImplementedError):
-        vj.closed_loop_step(vj.KneedWalker(), jnp.zeros(6), vj.ZeroFeedback())
+        vj.closed_loop_push_step(
+            vj.KneedWalker(), jnp.zeros(6), vj.ZeroFeedback(2), 0.1, jnp.zeros(2)
+        )
 
 
 @pytest.mark.parametrize("name", list(CASES))

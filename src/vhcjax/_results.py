@@ -50,6 +50,12 @@ class RESULTS(eqx.Enumeration):
     not_requested = (
         "The transverse linearization was not asked for; the Poincare-map Jacobian decides."
     )
+    riccati_ill_conditioned = (
+        "The Hamiltonian monodromy cannot be computed in double precision (fast modes "
+        "over a long phase, e.g. a light joint with a cheap torque: its flow overflows, "
+        "exhausts max_steps or loses its symplectic structure); the backward Riccati "
+        "iteration decides."
+    )
     not_a_gait = (
         "The state is not a period-1 gait: one step moves it on the section by more than "
         "1e-6 relative to max(1, |z|), so its Jacobian's eigenvalues are not Floquet "

@@ -3,16 +3,19 @@
 import math
 
 from ._common import (
+    KNEED_SEED,
+    KNEED_SLOPE_DEG,
     POSITIVE,
     CLIError,
     ComputationFailed,
+    add_model_choice,
     add_model_flags,
     check_finite,
     check_output_file,
     count,
-    model_from_args,
     number,
     print_json,
+    walker_from_args,
 )
 
 FAMILIES = ("unstable", "stable")
@@ -21,38 +24,44 @@ FAMILIES = ("unstable", "stable")
 def register(subparsers):
     p = subparsers.add_parser(
         "stabilize",
-        help="stabilize a gait with a hip torque (transverse-linearization LQR)",
-        description="Period-1 gait of the compass gait at the slope (family 'unstable', or "
-        "'stable': the symmetric gait, unstable through a flip past its period doubling), "
-        "its transverse linearization with a hip torque, the periodic hybrid Riccati "
-        "solution (two ways), the closed-loop multipliers (two ways), a closed-loop "
-        "simulation from the perturbed gait and, with --basin, basin slices with and "
-        "without feedback.",
+        help="stabilize a gait with joint torques (transverse-linearization LQR)",
+        description="Period-1 gait at the slope (compass gait: family 'unstable', or "
+        "'stable': the symmetric gait, unstable through a flip past its period doubling; "
+        "kneed walker: its gait, continued in the slope from its reference gait), its "
+        "transverse linearization with the joint torques (compass gait: hip; kneed "
+        "walker: hip and knee), the periodic hybrid Riccati solution (two ways), the "
+        "closed-loop multipliers (two ways), a closed-loop simulation from the perturbed "
+        "gait and, with --basin, basin slices with and without feedback.",
     )
     add_model_flags(p)
     p.add_argument(
-        "--family", choices=FAMILIES, default="unstable", help="gait family (default unstable)"
+        "--family",
+        choices=FAMILIES,
+        default=None,
+        help="compass-gait family (default unstable)",
     )
-    p.add_argument(
-        "--model",
-        choices=("compass", "kneed"),
-        default="compass",
-        help="walker (default compass; kneed: not supported, multi-domain)",
-    )
+    add_model_choice(p)
     p.add_argument(
         "--q",
-        default="1,1,1",
-        metavar="Q1,Q2,Q3",
-        help="diagonal LQR weights on (delta q2, delta dq1, delta dq2) per second, "
-        ">= 0 (default 1,1,1); also the jump weight",
+        default=None,
+        metavar="Q1,Q2,...",
+        help="diagonal LQR weights per second on the transverse coordinates, >= 0, "
+        "also the heel-strike weight: compass gait (delta q2, delta dq1, delta dq2), "
+        "kneed walker (delta q2, delta q3, delta dq1, delta dq2, delta dq3); default all 1",
     )
-    p.add_argument("--r", type=POSITIVE, default=1.0, help="LQR weight on the torque, > 0")
+    p.add_argument(
+        "--r",
+        default=None,
+        metavar="R[,R2]",
+        help="LQR weight per second on each torque, > 0: one value for all, or one per "
+        "torque (kneed walker: hip,knee); default 1",
+    )
     p.add_argument(
         "--torque-limit",
         type=POSITIVE,
         default=None,
         metavar="NM",
-        help="saturation of the hip torque in N m, > 0 (default: none)",
+        help="saturation of each joint torque in N m, > 0 (default: none)",
     )
     p.add_argument(
         "--perturbation",
@@ -80,24 +89,45 @@ def register(subparsers):
     p.set_defaults(func=run_stabilize)
 
 
-def _weights(args):
+#: Transverse coordinates and torques of each model (the --q and --r entries).
+_COORDINATES = {
+    "compass": ("delta q2", "delta dq1", "delta dq2"),
+    "kneed": ("delta q2", "delta q3", "delta dq1", "delta dq2", "delta dq3"),
+}
+_TORQUES = {"compass": ("hip",), "kneed": ("hip", "knee")}
+
+
+def _numbers(flag, text, n, names):
     try:
-        q = [float(v) for v in args.q.split(",")]
+        values = [float(v) for v in text.split(",")]
     except ValueError:
-        raise CLIError(f"--q must be three comma-separated numbers, got {args.q!r}") from None
-    if len(q) != 3:
-        raise CLIError(f"--q needs 3 weights (delta q2, delta dq1, delta dq2), got {len(q)}")
-    check_finite("--q", *q)
+        raise CLIError(f"{flag} must be comma-separated numbers, got {text!r}") from None
+    if len(values) != n:
+        raise CLIError(f"{flag} needs {n} weights ({', '.join(names)}), got {len(values)}")
+    check_finite(flag, *values)
+    return values
+
+
+def _weights(args):
+    coords, torques = _COORDINATES[args.model], _TORQUES[args.model]
+    text = args.q if args.q is not None else ",".join("1" * len(coords))
+    q = _numbers("--q", text, len(coords), coords)
     if min(q) < 0 or max(q) == 0:
-        raise CLIError(f"--q must be >= 0 and not all zero, got {args.q!r}")
-    check_finite("--r", args.r)
-    if args.r <= 0:
-        raise CLIError(f"--r must be positive, got {args.r}")
-    return q
+        raise CLIError(f"--q must be >= 0 and not all zero, got {text!r}")
+    text = args.r if args.r is not None else "1"
+    n = 1 if "," not in text else len(torques)
+    r = _numbers("--r", text, n, torques)
+    if min(r) <= 0:
+        raise CLIError(f"--r must be positive, got {text!r}")
+    return q, r * (len(torques) // n)
 
 
 def _check(args):
-    q = _weights(args)
+    if args.model == "kneed" and args.family is not None:
+        raise CLIError("--family is a compass-gait flag: the kneed walker has one family")
+    if args.model == "compass" and args.family is None:
+        args.family = "unstable"
+    weights = _weights(args)
     if args.torque_limit is not None:
         check_finite("--torque-limit", args.torque_limit)
         if args.torque_limit <= 0:
@@ -109,12 +139,7 @@ def _check(args):
         raise CLIError(f"--steps must be >= 1, got {args.steps}")
     if args.basin_grid < 2:
         raise CLIError(f"--basin-grid must be >= 2, got {args.basin_grid}")
-    if args.model == "kneed":
-        raise CLIError(
-            "the kneed walker is a multi-domain model: closed-loop stabilization "
-            "is implemented for single-domain walkers (--model compass) only"
-        )
-    return q
+    return weights
 
 
 def _finite_or_none(obj):
@@ -135,8 +160,31 @@ def _finite_or_none(obj):
     return obj
 
 
+def _kneed_gait(model):
+    """The kneed walker's gait at the model's slope, continued in the slope (steps of at
+    most 0.005 rad, secant predictor) from its gait at the reference slope."""
+    import equinox as eqx
+    import jax.numpy as jnp
+    import numpy as np
+
+    from .._results import RESULTS
+    from ..hybrid import fixed_point_jit
+
+    target = float(model.psi)
+    start = math.radians(KNEED_SLOPE_DEG)
+    n = max(1, math.ceil(abs(target - start) / 0.005))
+    z_prev = z = jnp.asarray(KNEED_SEED)
+    for k, psi in enumerate(np.linspace(start, target, n + 1)):
+        guess = z if k < 2 else 2 * z - z_prev
+        fp = fixed_point_jit(eqx.tree_at(lambda m: m.psi, model, jnp.asarray(psi)), guess)
+        if fp.result != RESULTS.successful:
+            return None, math.degrees(psi)
+        z_prev, z = z, fp.z
+    return z, None
+
+
 def run_stabilize(args):
-    q = _check(args)
+    q, r = _check(args)
     check_output_file(args.png, "--png")
     import equinox as eqx
     import jax
@@ -144,22 +192,31 @@ def run_stabilize(args):
     import numpy as np
 
     from .. import control
-    from .._results import result_names
+    from .._results import RESULTS, result_names
     from ..hybrid import FAST_CONFIG
     from ..plotting import plot_stabilization
     from ..stability import period1_family
 
-    model = model_from_args(args)
-    psi = math.radians(args.slope_deg)
-    fam = period1_family([psi], args.family, model=model)
-    if result_names(fam.result)[0] != "successful":
-        raise ComputationFailed(
-            f"no {args.family} period-1 gait found at {args.slope_deg} deg "
-            f"({result_names(fam.result)[0]})"
-        )
-    z = fam.z[0]
+    kneed = args.model == "kneed"
+    model = walker_from_args(args)
+    if kneed:
+        z, lost = _kneed_gait(model)
+        if z is None:
+            raise ComputationFailed(
+                f"no kneed-walker gait found at {args.slope_deg} deg: its continuation "
+                f"from {KNEED_SLOPE_DEG:.4f} deg stops at {lost:.4f} deg"
+            )
+    else:
+        psi = math.radians(args.slope_deg)
+        fam = period1_family([psi], args.family, model=model)
+        if result_names(fam.result)[0] != "successful":
+            raise ComputationFailed(
+                f"no {args.family} period-1 gait found at {args.slope_deg} deg "
+                f"({result_names(fam.result)[0]})"
+            )
+        z = fam.z[0]
     limit = math.inf if args.torque_limit is None else args.torque_limit
-    st = control.stabilize(model, z, jnp.asarray(q), jnp.asarray([args.r]))
+    st = control.stabilize(model, z, jnp.asarray(q), jnp.asarray(r))
     st = eqx.tree_at(lambda s: s.feedback, st, control.with_torque_limit(st.feedback, limit))
     zn = np.asarray(z)
     out = {
@@ -168,7 +225,8 @@ def run_stabilize(args):
         "family": args.family,
         "model": args.model,
         "gait": zn,
-        "weights": {"q": q, "r": args.r, "q_jump": q},
+        "weights": {"q": q, "r": r if kneed else r[0], "q_jump": q},
+        "torques": list(_TORQUES[args.model]),
         "torque_limit": args.torque_limit,
         "open_loop_multipliers": st.open_loop_multipliers,
         "closed_loop_multipliers": st.closed_loop_multipliers,
@@ -176,6 +234,11 @@ def run_stabilize(args):
         "riccati_agreement": float(st.riccati_agreement),
         "max_gain": float(st.max_gain),
     }
+    check = result_names(st.riccati_check.result)
+    if check != "successful":
+        out["riccati_agreement_reason"] = (
+            f"the Hamiltonian check did not hold ({check}): {RESULTS[st.riccati_check.result]}"
+        )
     ok = out["result"] == "successful"
     stable = bool(np.max(np.abs(np.asarray(st.closed_loop_multipliers))) < 1) and ok
     out["stable"] = stable
@@ -184,7 +247,8 @@ def run_stabilize(args):
 
     x0 = model.section_to_state(z + args.perturbation)
     sim = control.simulate_closed_loop(model, x0, st.feedback, args.steps)
-    passive = control.simulate_closed_loop(model, x0, control.ZeroFeedback(), args.steps)
+    zero = control.ZeroFeedback(len(_TORQUES[args.model]))
+    passive = control.simulate_closed_loop(model, x0, zero, args.steps)
 
     def errors(s):
         zs = np.asarray(jax.vmap(model.state_to_section)(s.steps.x_plus))
@@ -226,7 +290,7 @@ def run_stabilize(args):
             "config": FAST_CONFIG,
         }
         bc = control.closed_loop_basin(model, st.feedback, z, **kw)
-        bp = control.closed_loop_basin(model, control.ZeroFeedback(), z, **kw)
+        bp = control.closed_loop_basin(model, zero, z, **kw)
         conv = np.asarray(bc.converged)
         tmax = np.asarray(bc.max_abs_torque)[conv]
         trms = np.asarray(bc.rms_torque)[conv]
@@ -260,32 +324,42 @@ def run_stabilize(args):
             if args.torque_limit is None
             else f"torque limit {args.torque_limit:g} N m"
         )
-        title = (
-            f"Compass gait, {args.family} period-1 gait at {args.slope_deg:g} deg, "
-            f"stabilized by a hip torque (Q = diag({args.q}), R = {args.r:g}, {lim}); "
-            f"perturbation {args.perturbation:g}"
+        weights = f"Q = diag({','.join(f'{v:g}' for v in q)}), R = {','.join(f'{v:g}' for v in r)}"
+        case = (
+            f"Kneed walker, gait at {args.slope_deg:g} deg, stabilized by hip and knee torques"
+            if kneed
+            else f"Compass gait, {args.family} period-1 gait at {args.slope_deg:g} deg, "
+            "stabilized by a hip torque"
         )
+        title = f"{case} ({weights}, {lim}); perturbation {args.perturbation:g}"
+        s_grid = np.asarray(st.system.domains[0].s if kneed else st.system.s)
         plot_stabilization(
             args.png,
             title,
-            np.asarray(st.system.s),
+            s_grid,
             np.asarray(st.riccati.K),
             err_c,
             err_p,
             basin_plot,
+            coordinates=_COORDINATES[args.model],
+            torques=_TORQUES[args.model],
+            reset_names=("knee strike",) if kneed else None,
         )
     if args.json:
         print_json(_finite_or_none(out))
     else:
         fmt = lambda ev: ", ".join(f"{complex(v):.6g}" for v in np.asarray(ev))
-        print(f"{args.family} gait at {args.slope_deg:g} deg: z = {np.round(zn, 8).tolist()}")
+        what = "kneed-walker" if kneed else args.family
+        print(f"{what} gait at {args.slope_deg:g} deg: z = {np.round(zn, 8).tolist()}")
         print(f"open-loop multipliers:   {fmt(st.open_loop_multipliers)}")
         print(f"closed-loop multipliers: {fmt(st.closed_loop_multipliers)} (Poincare map)")
         print(f"                         {fmt(st.closed_loop_multipliers_transverse)} (transverse)")
-        print(
-            f"Riccati two ways agree to {float(st.riccati_agreement):.2e}; max gain "
-            f"{float(st.max_gain):.4g}; stable: {stable}"
+        agreement = (
+            f"Riccati two ways agree to {float(st.riccati_agreement):.2e}"
+            if check == "successful"
+            else f"Riccati check by the Hamiltonian monodromy: {check}"
         )
+        print(f"{agreement}; max gain {float(st.max_gain):.4g}; stable: {stable}")
         s = out["simulation"]
 
         def end(key):

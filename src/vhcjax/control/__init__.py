@@ -9,6 +9,7 @@ from ._actuated import (
     ZeroFeedback as ZeroFeedback,
     actuated_vector_field as actuated_vector_field,
     closed_loop_step as closed_loop_step,
+    in_domain as in_domain,
     input_matrix as input_matrix,
     simulate_closed_loop as simulate_closed_loop,
     step_torque as step_torque,
@@ -27,6 +28,7 @@ from ._closed_loop import (
     stabilize as stabilize,
 )
 from ._feedback import (
+    HybridTransverseFeedback as HybridTransverseFeedback,
     TransverseFeedback as TransverseFeedback,
     transverse_feedback as transverse_feedback,
     with_torque_limit as with_torque_limit,
@@ -37,6 +39,7 @@ from ._riccati import (
     riccati_hamiltonian as riccati_hamiltonian,
 )
 from ._transverse import (
+    HybridTransverseSystem as HybridTransverseSystem,
     TransverseSystem as TransverseSystem,
     jump_matrix as jump_matrix,
     transverse_system as transverse_system,

@@ -4,7 +4,8 @@ a feedback law.
 The equations of motion with an input are
 $M(q)\\ddot q + C(q,\\dot q)\\dot q + G(q) = B(q)u$ (thesis 3.7 with a generalized force);
 a model declares its input matrix by a method `input_matrix(q)` (shape `(n, m)`; e.g.
-the hip torque of `CompassGait`). A feedback law is any callable `k(x, model) -> u`,
+the hip torque of `CompassGait`, the hip and knee torques of `KneedWalker`; a
+multi-domain model applies them through `domain_vector_field(i, x, Bu)`). A feedback law is any callable `k(x, model) -> u`,
 typically an `eqx.Module` (a pytree: `jit`, `vmap` and `jacfwd` go through it). Impacts
 are unchanged: the torques are bounded, so they do no work during the instantaneous
 heel strike.
@@ -17,7 +18,14 @@ import jax.numpy as jnp
 
 from .._programs import stored_jit
 from .._results import RESULTS
-from ..hybrid import DEFAULT_CONFIG, StepResult, flow, step_unchecked
+from ..hybrid import (
+    DEFAULT_CONFIG,
+    DomainView,
+    StepResult,
+    flow,
+    multidomain_step,
+    step_unchecked,
+)
 
 
 def input_matrix(model, q):
@@ -34,11 +42,33 @@ def num_inputs(model):
     return jax.eval_shape(lambda qq: input_matrix(model, qq), q).shape[1]
 
 
-def actuated_vector_field(model, x, u):
-    """$\\dot x = (\\dot q, M^{-1}(Bu - C\\dot q - G))$ at state `x` and input `u`."""
+def actuated_vector_field(model, x, u, domain=None):
+    """$\\dot x = (\\dot q, M^{-1}(Bu - C\\dot q - G))$ at state `x` and input `u`; in
+    domain `domain` (static int) of a multi-domain model, that domain's dynamics."""
     n = model.n_dof
     q, dq = x[:n], x[n:]
+    if is_multidomain(model):
+        return model.domain_vector_field(_domain(domain), x, input_matrix(model, q) @ u)
     return jnp.concatenate([dq, model.acceleration(q, dq, input_matrix(model, q) @ u)])
+
+
+def is_multidomain(model):
+    """Whether `model` is a multi-domain model (a cycle of domains, e.g. `KneedWalker`)."""
+    return hasattr(model, "hybrid_step")
+
+
+def _domain(domain):
+    if domain is None:
+        raise ValueError("a multi-domain model needs the domain index")
+    return domain
+
+
+def in_domain(feedback, domain):
+    """The law `feedback` applies in domain `domain` of a multi-domain model: its
+    `in_domain(domain)` if it has one (e.g. `HybridTransverseFeedback`), else itself."""
+    if domain is not None and hasattr(feedback, "in_domain"):
+        return feedback.in_domain(domain)
+    return feedback
 
 
 class ZeroFeedback(eqx.Module):
@@ -51,31 +81,31 @@ class ZeroFeedback(eqx.Module):
         return jnp.zeros(self.num_inputs, x.dtype)
 
 
-def closed_loop_field(model, feedback):
-    """Vector field `(t, x, args) -> xdot` of the walker under `u = feedback(x, model)`."""
+def closed_loop_field(model, feedback, domain=None):
+    """Vector field `(t, x, args) -> xdot` of the walker under `u = feedback(x, model)`
+    (in domain `domain` of a multi-domain model)."""
+    law = in_domain(feedback, domain)
 
     def field(t, x, args):
-        return actuated_vector_field(model, x, feedback(x, model))
+        return actuated_vector_field(model, x, law(x, model), domain)
 
     return field
 
 
-def _single_domain(model):
-    if hasattr(model, "hybrid_step"):
-        raise NotImplementedError(
-            f"{type(model).__name__} is a multi-domain model: closed-loop steps are "
-            "implemented for single-domain walkers only"
-        )
+def _fields(model, feedback):
+    return [closed_loop_field(model, feedback, i) for i in range(model.num_domains)]
 
 
 def closed_loop_step(model, x0, feedback, config=DEFAULT_CONFIG, alive=True):
-    """One step (swing to heel strike, impact) of the walker under `feedback`.
+    """One step (swing to heel strike, impact; every domain of a multi-domain model) of
+    the walker under `feedback`.
 
     Same contract as `vhcjax.step` with `throw=False`: returns a `StepResult`, failures as
-    result codes. Differentiable in forward mode through the heel-strike event.
+    result codes. Differentiable in forward mode through the events.
     """
-    _single_domain(model)
     x0 = jnp.asarray(x0, float)
+    if is_multidomain(model):
+        return multidomain_step(model, x0, config, alive, None, _fields(model, feedback))[0]
     return step_unchecked(model, x0, config, alive, None, closed_loop_field(model, feedback))
 
 
@@ -84,6 +114,8 @@ def step_torque(model, x0, period, feedback, num_points=64, config=DEFAULT_CONFI
 
     **Returns:** `(ts, u)` with shapes `(num_points,)` and `(num_points, m)`.
     """
+    if is_multidomain(model):
+        raise ValueError("step_torque: a multi-domain step has a time grid per domain")
     ts = jnp.linspace(0.0, 1.0, num_points) * period
     sol = flow(
         model,
@@ -96,6 +128,37 @@ def step_torque(model, x0, period, feedback, num_points=64, config=DEFAULT_CONFI
     )
     u = jax.vmap(lambda x: feedback(x, model))(sol.ys)
     return ts, u
+
+
+def _torque_stats(model, x0, feedback, config, alive, num_points):
+    """One closed-loop step and `(max |u|, RMS u)` on `num_points` samples of it (per
+    domain for a multi-domain model); zeros where the step failed."""
+    if not is_multidomain(model):
+        sr = closed_loop_step(model, x0, feedback, config, alive)
+        ok = sr.result == RESULTS.successful
+        _, u = step_torque(model, x0, jnp.where(ok, sr.period, 1e-9), feedback, num_points, config)
+    else:
+        sr, info = multidomain_step(model, x0, config, alive, None, _fields(model, feedback))
+        ok = sr.result == RESULTS.successful
+        us = []
+        for i in range(model.num_domains):
+            dur = jnp.where(ok, info.duration[i], 1e-9)
+            ts = jnp.linspace(0.0, 1.0, num_points) * dur
+            sol = flow(
+                DomainView(model, i),
+                info.x_start[i],
+                dur + 1e-12,
+                config,
+                saveat=diffrax.SaveAt(ts=ts),
+                event=False,
+                vector_field=closed_loop_field(model, feedback, i),
+            )
+            law = in_domain(feedback, i)
+            us.append(jax.vmap(lambda x, law=law: law(x, model))(sol.ys))
+        u = jnp.concatenate(us)
+    umax = jnp.where(ok, jnp.max(jnp.abs(u)), 0.0)
+    urms = jnp.where(ok, jnp.sqrt(jnp.mean(u**2)), 0.0)
+    return sr, umax, urms
 
 
 class ClosedLoopSimulation(eqx.Module):
@@ -127,7 +190,7 @@ def simulate_closed_loop(
 
     **Arguments:**
 
-    - `model`: a single-domain `WalkerModel` with an `input_matrix`.
+    - `model`: a `WalkerModel` (single- or multi-domain) with an `input_matrix`.
     - `x0`: initial post-impact state `[q, dq]`.
     - `feedback`: `k(x, model) -> u`, e.g. a `TransverseFeedback` or `ZeroFeedback`.
     - `num_steps`: number of steps (static).
@@ -136,24 +199,21 @@ def simulate_closed_loop(
 
     **Returns:** a `ClosedLoopSimulation`.
     """
-    _single_domain(model)
     x0 = jnp.asarray(x0, float)
 
     def body(carry, _):
         x, alive, first_fail = carry
-        sr = closed_loop_step(model, x, feedback, config, alive)
+        if torque_points:
+            sr, umax, urms = _torque_stats(model, x, feedback, config, alive, torque_points)
+        else:
+            sr = closed_loop_step(model, x, feedback, config, alive)
+            umax = urms = jnp.zeros((), x.dtype)
         ok = alive & (sr.result == RESULTS.successful)
         new_fail = RESULTS.where(alive & ~ok, sr.result, first_fail)
         result = RESULTS.where(alive, sr.result, first_fail)
         x_next = jnp.where(ok, sr.x_plus, x)
-        if torque_points:
-            _, u = step_torque(
-                model, x, jnp.where(ok, sr.period, 1e-9), feedback, torque_points, config
-            )
-            umax = jnp.where(ok, jnp.max(jnp.abs(u)), 0.0)
-            urms = jnp.where(ok, jnp.sqrt(jnp.mean(u**2)), 0.0)
-        else:
-            umax = urms = jnp.zeros((), x.dtype)
+        umax = jnp.where(ok, umax, 0.0)
+        urms = jnp.where(ok, urms, 0.0)
         out = StepResult(
             jnp.where(alive, sr.x_minus, x),
             x_next,

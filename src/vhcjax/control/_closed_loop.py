@@ -7,6 +7,9 @@
 - `closed_loop_jacobian` / `closed_loop_multipliers`: the Poincare map of the walker
   under the feedback law on the post-impact section, differentiated by forward-mode
   autodiff through the heel-strike event (independent of the linearization).
+- Multi-domain models (the kneed walker): one transverse system, gain table and law
+  per domain (`HybridTransverseSystem`, `HybridTransverseFeedback`); the closed-loop
+  step applies each domain's law in that domain.
 - `closed_loop_basin`: a 2-D slice of the basin of attraction on the post-impact
   section, with the torque used per converging point.
 """
@@ -20,10 +23,24 @@ from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, SolverConfig, flow
 from ..robustness import direction, finish_step, impulse_velocity_jump, swing_from
-from ._actuated import closed_loop_field, closed_loop_step, num_inputs, simulate_closed_loop
-from ._feedback import TransverseFeedback, transverse_feedback
-from ._riccati import RiccatiSolution, riccati_backward, riccati_hamiltonian
-from ._transverse import TransverseSystem, phase_field, phase_matrices, transverse_system
+from ._actuated import (
+    closed_loop_field,
+    closed_loop_step,
+    in_domain,
+    is_multidomain,
+    num_inputs,
+    simulate_closed_loop,
+)
+from ._feedback import HybridTransverseFeedback, TransverseFeedback, transverse_feedback
+from ._riccati import RiccatiSolution, _pieces, riccati_backward, riccati_hamiltonian
+from ._transverse import (
+    HybridTransverseSystem,
+    TransverseSystem,
+    cycle_monodromy,
+    phase_field,
+    phase_matrices,
+    transverse_system,
+)
 
 #: Hybrid-step settings of the closed-loop Poincare map: at the default 1e-10 the
 #: autodiff Jacobian of the step map carries the ODE error (~1e-6 in the multipliers).
@@ -39,33 +56,45 @@ def closed_loop_multipliers_transverse(
 ):
     """Closed-loop multipliers from the transverse linearization: eigenvalues of
     $J\\,\\Phi_{cl}(1)$, $d\\Phi_{cl}/ds = (dt/ds)(A - BK(s))\\Phi_{cl}$, with $K(s)$ the
-    gain interpolant of `feedback` (saturation inactive at the orbit). Sorted by modulus.
+    gain interpolant of `feedback` (saturation inactive at the orbit). For a
+    `HybridTransverseSystem`, the product around the cycle in free coordinates (as its
+    `multipliers`). Sorted by modulus.
     """
-    r = system.w.shape[1]
-    tp, delta = system.theta_plus, system.theta_minus - system.theta_plus
+    doms, bases, k, dom = _pieces(system)
     u0 = jnp.zeros(num_inputs(model))
+    transitions = []
+    for i, d in enumerate(doms):
+        P, law = bases[i], in_domain(feedback, dom(i))
+        r = d.w.shape[1] if P is None else P.shape[1]
+        nw = d.w.shape[1]
+        tp, delta = d.theta_plus, d.theta_minus - d.theta_plus
 
-    def field(s, y, args):
-        w = y[:r]
-        Phi = y[r:].reshape(r, r)
-        A, B, c = phase_matrices(model, tp, delta, s, w)
-        dw = phase_field(model, tp, delta, s, w, u0)[0]
-        return jnp.concatenate([dw, (c * (A - B @ feedback.gain(s)) @ Phi).reshape(-1)])
+        def field(s, y, args, P=P, law=law, r=r, nw=nw, tp=tp, delta=delta, i=i):
+            w = y[:nw]
+            Phi = y[nw:].reshape(r, r)
+            A, B, c = phase_matrices(model, tp, delta, s, w, dom(i))
+            dw = phase_field(model, tp, delta, s, w, u0, dom(i))[0]
+            K = law.gain(s)
+            if P is not None:
+                A, B, K = P.T @ A @ P, P.T @ B, K @ P
+            return jnp.concatenate([dw, (c * (A - B @ K) @ Phi).reshape(-1)])
 
-    y0 = jnp.concatenate([system.w[0], jnp.eye(r).reshape(-1)])
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(field),
-        diffrax.Tsit5(),
-        t0=0.0,
-        t1=1.0,
-        dt0=None,
-        y0=y0,
-        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-        max_steps=max_steps,
-        throw=False,
-    )
-    assert sol.ys is not None  # saved at t1
-    return _sort(jnp.linalg.eigvals(system.J @ sol.ys[-1, r:].reshape(r, r)))
+        y0 = jnp.concatenate([d.w[0], jnp.eye(r).reshape(-1)])
+        sol = diffrax.diffeqsolve(
+            diffrax.ODETerm(field),
+            diffrax.Tsit5(),
+            t0=0.0,
+            t1=1.0,
+            dt0=None,
+            y0=y0,
+            stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+            max_steps=max_steps,
+            throw=False,
+        )
+        assert sol.ys is not None  # saved at t1
+        transitions.append(sol.ys[-1, nw:].reshape(r, r))
+    M = cycle_monodromy(bases, k, transitions, [d.J for d in doms])
+    return _sort(jnp.linalg.eigvals(M))
 
 
 def closed_loop_step_map(model, feedback, z, config=DEFAULT_CONFIG):
@@ -88,25 +117,30 @@ def closed_loop_multipliers(model, feedback, z, config=TIGHT_CONFIG):
 class Stabilization(eqx.Module):
     """A gait stabilized by transverse-linearization LQR feedback.
 
-    - `system`: the `TransverseSystem` (open-loop `multipliers` included).
+    - `system`: the `TransverseSystem` (open-loop `multipliers` included; a
+      `HybridTransverseSystem` for a multi-domain model).
     - `riccati`: the `RiccatiSolution` by backward iteration (used for the gains).
-    - `riccati_check`: the `RiccatiSolution` by the Hamiltonian monodromy.
-    - `riccati_agreement`: $\\max|X_1 - X_2| / \\max|X_1|$ over the phase grid.
-    - `feedback`: the `TransverseFeedback` law.
+    - `riccati_check`: the `RiccatiSolution` by the Hamiltonian monodromy (its `result`
+      says when that method does not hold, e.g. `riccati_ill_conditioned`).
+    - `riccati_agreement`: $\\max|X_1 - X_2| / \\max|X_1|$ over the phase grid; NaN when
+      the check did not succeed.
+    - `feedback`: the `TransverseFeedback` law (`HybridTransverseFeedback`: one per
+      domain).
     - `open_loop_multipliers`: eigenvalues of $J\\Phi$ (passive gait).
     - `closed_loop_jacobian`: the autodiff Jacobian of the closed-loop step map at `z`
       (post-impact section coordinates).
     - `closed_loop_multipliers`: its eigenvalues.
     - `closed_loop_multipliers_transverse`: eigenvalues of $J\\Phi_{cl}$.
     - `max_gain`: $\\max_s \\|K(s)\\|_\\infty$ (largest entry).
-    - `result`: the first failure among the steps above, or `successful`.
+    - `result`: the first failure of the transverse system or the backward Riccati
+      solution, or `successful`.
     """
 
-    system: TransverseSystem
+    system: TransverseSystem | HybridTransverseSystem
     riccati: RiccatiSolution
     riccati_check: RiccatiSolution
     riccati_agreement: jax.Array
-    feedback: TransverseFeedback
+    feedback: TransverseFeedback | HybridTransverseFeedback
     open_loop_multipliers: jax.Array
     closed_loop_jacobian: jax.Array
     closed_loop_multipliers: jax.Array
@@ -132,11 +166,12 @@ def stabilize(
 
     **Arguments:**
 
-    - `model`: a single-domain `WalkerModel` with an `input_matrix`.
+    - `model`: a `WalkerModel` with an `input_matrix`, single- or multi-domain (e.g.
+      `KneedWalker`: one transverse system, gain table and feedback law per domain).
     - `z`: section coordinates of the gait (`model.state_to_section` of its post-impact
       state), a fixed point of the passive step map.
     - `Q`, `R`, `Q_jump`: LQR weights on $\\zeta$ (per second), on $u$ (per second) and on
-      $\\zeta^-$ at each impact; matrices or diagonals; default $I$, $I$, $Q$.
+      $\\zeta^-$ at each heel strike; matrices or diagonals; default $I$, $I$, $Q$.
     - `torque_limit`: saturation of each input (N m), default none.
     - `num_points`: phase-grid points of the tabulated orbit and gains.
     - `config`: `SolverConfig` of the hybrid steps (default `TIGHT_CONFIG`, 1e-12).
@@ -149,13 +184,12 @@ def stabilize(
     ric = riccati_backward(model, system, Q, R, Q_jump)
     ric2 = riccati_hamiltonian(model, system, Q, R, Q_jump)
     agree = jnp.max(jnp.abs(ric.X - ric2.X)) / jnp.max(jnp.abs(ric.X))
+    agree = jnp.where(ric2.result == RESULTS.successful, agree, jnp.nan)
     fb = transverse_feedback(system, ric, torque_limit)
     cl_t = closed_loop_multipliers_transverse(model, system, fb)
     jac = closed_loop_jacobian(model, fb, z, config)
     cl_p = _sort(jnp.linalg.eigvals(jac))
-    code = system.result
-    for c in (ric.result, ric2.result):
-        code = RESULTS.where(code == RESULTS.successful, c, code)
+    code = RESULTS.where(system.result == RESULTS.successful, ric.result, system.result)
     code = RESULTS.where(model.validate(), code, RESULTS.bad_input)
     return Stabilization(
         system,
@@ -250,7 +284,10 @@ def closed_loop_basin(
 def closed_loop_push_step(model, feedback, x0, t_push, impulse, config=DEFAULT_CONFIG, alive=True):
     """One step of the walker under `feedback` from the post-impact state `x0`, with a hip
     impulse `impulse` (N s, world frame) at time `t_push` into the step (as
-    `vhcjax.impulse_step`, which is the passive case). **Returns:** a `StepResult`."""
+    `vhcjax.impulse_step`, which is the passive case; single-domain models).
+    **Returns:** a `StepResult`."""
+    if is_multidomain(model):
+        raise NotImplementedError("closed-loop pushes: single-domain models only")
     n = model.n_dof
     field = closed_loop_field(model, feedback)
     t_max = config.t_max_factor * model.time_scale

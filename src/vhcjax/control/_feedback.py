@@ -84,18 +84,48 @@ class TransverseFeedback(eqx.Module):
         return jnp.clip(u, -self.torque_limit, self.torque_limit)
 
 
+class HybridTransverseFeedback(eqx.Module):
+    """The feedback law of a gait of a multi-domain model: one `TransverseFeedback` per
+    domain (`domains`), each on its own phase. The closed-loop step applies
+    `in_domain(i)` in domain `i` (`vhcjax.control.closed_loop_step`)."""
+
+    domains: tuple
+
+    def in_domain(self, i):
+        """The law of domain `i` (static int)."""
+        return self.domains[i]
+
+    @property
+    def torque_limit(self):
+        return self.domains[0].torque_limit
+
+    def __call__(self, x, model=None):
+        raise TypeError(
+            "a multi-domain feedback law depends on the domain: use in_domain(i)(x, model)"
+        )
+
+
 def transverse_feedback(system, riccati, torque_limit: float | jax.Array = jnp.inf):
-    """The `TransverseFeedback` of a `TransverseSystem` and its `RiccatiSolution`."""
+    """The `TransverseFeedback` of a `TransverseSystem` and its `RiccatiSolution` (a
+    `HybridTransverseFeedback` for a `HybridTransverseSystem`)."""
+    limit = jnp.asarray(torque_limit, float)
+    if hasattr(system, "domains"):
+        return HybridTransverseFeedback(
+            tuple(
+                TransverseFeedback(d.theta_plus, d.theta_minus, d.w, d.dw, riccati.K[i], limit)
+                for i, d in enumerate(system.domains)
+            )
+        )
     return TransverseFeedback(
-        system.theta_plus,
-        system.theta_minus,
-        system.w,
-        system.dw,
-        riccati.K,
-        jnp.asarray(torque_limit, float),
+        system.theta_plus, system.theta_minus, system.w, system.dw, riccati.K, limit
     )
 
 
 def with_torque_limit(feedback, torque_limit):
     """`feedback` with another saturation level (a leaf: no recompilation)."""
-    return eqx.tree_at(lambda f: f.torque_limit, feedback, jnp.asarray(torque_limit, float))
+    limit = jnp.asarray(torque_limit, float)
+    if isinstance(feedback, HybridTransverseFeedback):
+        return HybridTransverseFeedback(
+            tuple(with_torque_limit(f, limit) for f in feedback.domains)
+        )
+    return eqx.tree_at(lambda f: f.torque_limit, feedback, limit)

@@ -36,15 +36,19 @@ from ._simulate import DEFAULT_CONFIG, StepResult, _swing, flow
 
 
 # ---- generic constrained mechanics --------------------------------------------------------
-def locked_acceleration(model, q, dq, A):
-    """$\\ddot q$ of the system with the joints locked by $A q = $ const (KKT solve).
+def locked_acceleration(model, q, dq, A, generalized_force=None):
+    """$\\ddot q$ of the system with the joints locked by $A q = $ const (KKT solve),
+    under an optional generalized force (e.g. joint torques $Bu$).
 
     **Returns:** `(ddq, lam)`, with `lam` the constraint forces (generalized, per row of A).
     """
     M = mech.mass_matrix(model, q)
     n, k = q.shape[0], A.shape[0]
     kkt = jnp.block([[M, -A.T], [A, jnp.zeros((k, k), q.dtype)]])
-    rhs = jnp.concatenate([-mech.bias_forces(model, q, dq), jnp.zeros(k, q.dtype)])
+    force = -mech.bias_forces(model, q, dq)
+    if generalized_force is not None:
+        force = force + generalized_force
+    rhs = jnp.concatenate([force, jnp.zeros(k, q.dtype)])
     sol = jnp.linalg.solve(kkt, rhs)
     return sol[:n], sol[n:]
 
@@ -89,13 +93,17 @@ class MultiDomainModel(WalkerModel):
     Subclasses implement, besides the energies, `contact_point`, `fallen`, `relabel` and
     the section chart of `WalkerModel`:
 
-    - `domain_vector_field(i, x)`: $\\dot x$ in domain `i` (static int).
+    - `domain_vector_field(i, x, generalized_force=None)`: $\\dot x$ in domain `i`
+      (static int), under an optional generalized force (joint torques $Bu$).
     - `domain_guard(i, q)`: scalar whose downward zero crossing ends domain `i`.
     - `domain_strike_gate(i, q)`: optional upward-crossing gate (default `None`).
     - `domain_reset(i, x_minus)`: `(x_plus, impulse, physical)` into domain `i + 1`
       (the last one is the heel strike with relabelling, into domain 0).
     - `domain_admissible(i, x)`: optional boolean check of the state entering domain `i`
       (default: always); a failure ends the step with `RESULTS.fell`.
+    - `domain_constraint(i)`: optional constant matrix $A$ of the joints locked in
+      domain `i` ($A q$ and $A\\dot q$ constant there), or `None` (default). The
+      transverse linearization (`vhcjax.control`) works on the remaining coordinates.
 
     The section (`section_to_state`) lies at the start of domain 0.
     """
@@ -103,7 +111,7 @@ class MultiDomainModel(WalkerModel):
     num_domains: ClassVar[int]
 
     @abc.abstractmethod
-    def domain_vector_field(self, i, x): ...
+    def domain_vector_field(self, i, x, generalized_force=None): ...
 
     @abc.abstractmethod
     def domain_guard(self, i, q): ...
@@ -116,6 +124,9 @@ class MultiDomainModel(WalkerModel):
 
     def domain_admissible(self, i, x):
         return jnp.asarray(True)
+
+    def domain_constraint(self, i):
+        return None
 
     # WalkerModel's single-domain hooks map to the heel strike (the last domain).
     def guard(self, q):
@@ -182,8 +193,11 @@ class DomainInfo(eqx.Module):
     result: RESULTS
 
 
-def multidomain_step(model, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None):
+def multidomain_step(model, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None, fields=None):
     """One cycle of a `MultiDomainModel` through all its domains.
+
+    `fields`: optional vector fields `(t, x, args) -> xdot`, one per domain, replacing
+    the model's (e.g. the walker under a feedback law, `vhcjax.control`).
 
     **Returns:** `(StepResult, DomainInfo)`; the `StepResult` has the pre-heel-strike state
     as `x_minus`, the total cycle time as `period` and the heel-strike impulse.
@@ -205,7 +219,8 @@ def multidomain_step(model, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None)
         code = RESULTS.where(ok_before & ~admissible, RESULTS.fell, code)
         live = alive & (code == RESULTS.successful)
         view = DomainView(model, i)
-        x_end, dt, code_i = _swing(view, x, t_max, live, config, adjoint, None)
+        field = None if fields is None else fields[i]
+        x_end, dt, code_i = _swing(view, x, t_max, live, config, adjoint, field)
         x_plus, impulse, physical = model.domain_reset(i, x_end)
         finite = jnp.all(jnp.isfinite(x_plus)) & jnp.all(jnp.isfinite(impulse))
         ok_i = code_i == RESULTS.successful

@@ -17,6 +17,7 @@ from typing import ClassVar
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from .. import trig
 from ..hybrid import (
@@ -26,7 +27,7 @@ from ..hybrid import (
     locked_acceleration,
 )
 
-_KNEE = jnp.array([[0.0, 1.0, -1.0]])  # A q = q2 - q3 = 0: knee locked
+_KNEE = np.array([[0.0, 1.0, -1.0]])  # A q = q2 - q3 = 0: knee locked
 
 
 class KneedWalker(MultiDomainModel):
@@ -150,13 +151,24 @@ class KneedWalker(MultiDomainModel):
         return total
 
     # ---- domains ------------------------------------------------------------------------
-    def domain_vector_field(self, i, x):
+    def domain_vector_field(self, i, x, generalized_force=None):
         q, dq = x[:3], x[3:]
         if i == 0:
-            ddq = self.acceleration(q, dq)
+            ddq = self.acceleration(q, dq, generalized_force)
         else:
-            ddq, _ = locked_acceleration(self, q, dq, _KNEE.astype(q.dtype))
+            ddq, _ = locked_acceleration(self, q, dq, _KNEE.astype(q.dtype), generalized_force)
         return jnp.concatenate([dq, ddq])
+
+    def domain_constraint(self, i):
+        """The knee is locked ($q_2 - q_3$ constant) in domain 1."""
+        return None if i == 0 else _KNEE
+
+    def input_matrix(self, q):
+        """$B(q)$ of $M\\ddot q + C\\dot q + G = B u$: a hip torque $u_1$ on the relative
+        angle $q_2 - q_1$ (stance leg and swing thigh) and a knee torque $u_2$ on
+        $q_3 - q_2$ (thigh and shank), N m. With the knee locked the knee torque is
+        taken up by the lock. Shape (3, 2)."""
+        return jnp.array([[-1.0, 0.0], [1.0, -1.0], [0.0, 1.0]], dtype=jnp.asarray(q).dtype)
 
     def knee_angle(self, q):
         """Knee flexion $q_2 - q_3$ (positive flexed, zero straight)."""

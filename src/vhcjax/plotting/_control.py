@@ -4,11 +4,28 @@ import numpy as np
 
 from ._common import pyplot
 
-_ZETA = (r"$\delta q_2$", r"$\delta\dot q_1$", r"$\delta\dot q_2$")
-_UNITS = ("N m/rad", "N m s/rad", "N m s/rad")
+
+def _label(name):
+    """'delta dq2' -> TeX label and gain unit (N m per rad or per rad/s)."""
+    sym = name.split()[-1]
+    if sym.startswith("dq"):
+        return rf"$\delta\dot q_{sym[2:]}$", "N m s/rad"
+    return rf"$\delta q_{sym[1:]}$", "N m/rad"
 
 
-def plot_stabilization(path, title, s, K, closed_errors, passive_errors, basin=None):
+def plot_stabilization(
+    path,
+    title,
+    s,
+    K,
+    closed_errors,
+    passive_errors,
+    basin=None,
+    *,
+    coordinates=("delta q2", "delta dq1", "delta dq2"),
+    torques=("hip",),
+    reset_names=None,
+):
     """Three panels: gains $K(s)$ against phase, recovery (error per step, closed loop and
     passive), basin slices with and without feedback (or a note when not computed).
 
@@ -16,26 +33,57 @@ def plot_stabilization(path, title, s, K, closed_errors, passive_errors, basin=N
 
     - `path`: PNG file.
     - `title`: names the case (model, slope, gait).
-    - `s`, `K`: phase grid and gains `(N+1, m, r)` (compass gait: r = 3).
+    - `s`, `K`: phase grid and gains `(N+1, m, r)` (compass gait: r = 3), or
+      `(num_domains, N+1, m, r)` for a multi-domain model (drawn domain after domain).
     - `closed_errors`, `passive_errors`: max-norm distance to the gait on the post-impact
       section after each step.
     - `basin`: `None` or a dict with `z_star`, `offsets_x`, `offsets_y` and boolean grids
       `passive`, `closed` (converged), over section coordinates $(q_1, \\dot q_1)$.
+    - `coordinates`, `torques`: names of the transverse coordinates (e.g. "delta dq2")
+      and of the torques, for the legend; `reset_names`: the internal resets between
+      domains (e.g. "knee strike"), marked on the gains panel.
     """
     plt = pyplot()
 
     K = np.asarray(K)
+    s = np.asarray(s)
+    domains = K.shape[0] if K.ndim == 4 else 1
+    if K.ndim == 4:  # one phase per domain: the cycle's phase runs 0..num_domains
+        s = np.concatenate([i + s for i in range(domains)])
+        K = K.reshape(-1, *K.shape[2:])
     fig, axes = plt.subplots(1, 3, figsize=(15, 5.2), dpi=110)
     ax = axes[0]
-    for j in range(K.shape[2]):
-        lab = _ZETA[j] if K.shape[2] == 3 else f"zeta_{j}"
-        unit = _UNITS[j] if K.shape[2] == 3 else ""
-        ax.plot(s, K[:, 0, j], label=f"gain on {lab} ({unit})")
-    ax.set_xlabel(r"phase $s = (q_1 - q_1^+)/(q_1^- - q_1^+)$ (1)")
-    ax.set_ylabel("hip torque gain $K(s)$ (units in legend)")
+    styles = ("-", "--", ":")
+    for i, torque in enumerate(torques):
+        for j, name in enumerate(coordinates):
+            lab, unit = _label(name)
+            ax.plot(
+                s,
+                K[:, i, j],
+                styles[i % 3],
+                color=f"C{j}",
+                label=f"{torque} gain on {lab} ({unit})",
+            )
+    if domains > 1:
+        for i in range(1, domains):
+            ax.axvline(i, color="k", lw=0.8, ls="-.")
+            if reset_names is not None:
+                ax.text(
+                    i,
+                    1.0,
+                    f" {reset_names[i - 1]}",
+                    transform=ax.get_xaxis_transform(),
+                    va="top",
+                    fontsize=8,
+                )
+        ax.set_xlabel("phase through the step, domain after domain (1)")
+    else:
+        ax.set_xlabel(r"phase $s = (q_1 - q_1^+)/(q_1^- - q_1^+)$ (1)")
+    names = " and ".join(torques)
+    ax.set_ylabel(f"{names} torque gain $K(s)$ (units in legend)")
     ax.set_title("LQR gains along the step")
     ax.axhline(0, color="k", lw=0.5)
-    ax.legend(fontsize=8)
+    ax.legend(fontsize=7 if len(torques) > 1 else 8)
 
     ax = axes[1]
     k = np.arange(1, len(closed_errors) + 1)
