@@ -84,3 +84,25 @@ def test_cli_says_when_the_step_budget_decides_the_largest_push(capsys):
     # first failing push is undecided, and the command says the budget decides
     assert max(max(row) for row in out["largest"]) < 1.0  # N s (0.89 at 30 steps)
     assert "at 8 of 8" in out["largest_reason"] and "raise --steps" in out["largest_reason"]
+    assert out["gait_stable"] is True and out["gait_spectral_radius"] < 1.0
+
+
+def test_cli_says_when_the_gait_is_unstable(capsys):
+    """`push` and `basin` at the unstable 3-degree gait: a warning and `gait_stable: false`
+    with the spectral radius of the Poincare map (4.29), beside the figures."""
+    from vhcjax.cli import main
+
+    unstable = ["--gait", "0.20467554", "-1.21057184", "-0.71248882"]
+    argv = ["push", *unstable, "--phases", "1", "--directions-deg", "0", "--iterations", "2"]
+    assert main(argv + ["--steps", "3", "--json", "--quiet"]) == 0
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
+    assert out["gait_stable"] is False
+    np.testing.assert_allclose(out["gait_spectral_radius"], 4.2915, atol=1e-3)
+    assert "the gait is unstable" in captured.err and "step budget" in out["gait_stable_reason"]
+    argv = ["basin", *unstable, "--grid", "3", "3", "--steps", "5", "--json", "--quiet"]
+    assert main(argv) == 0
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
+    assert out["gait_stable"] is False and "stable manifold" in out["gait_stable_reason"]
+    assert "the gait is unstable" in captured.err

@@ -65,6 +65,25 @@ def _gait(args):
     return model, fp.z, fp.x0, float(fp.periods[0]), np.asarray(fp.z)
 
 
+def _stability(args, model, z, out, consequence):
+    """Spectral radius of the step map at the gait into `out`; a warning (and
+    `gait_stable: false`) when the gait is unstable, saying what that means for the
+    figure (`consequence`)."""
+    import numpy as np
+
+    from ..hybrid import jacobian_jit
+
+    rho = float(np.max(np.abs(np.linalg.eigvals(np.asarray(jacobian_jit(model, z))))))
+    out["gait_spectral_radius"] = rho
+    out["gait_stable"] = rho < 1.0
+    if rho >= 1.0:
+        reason = (
+            f"the gait is unstable (spectral radius {rho:.4g} of its Poincare map): " + consequence
+        )
+        out["gait_stable_reason"] = reason
+        warn(args, reason)
+
+
 def _bar(args):
     return None if args.quiet else (lambda it: progress(it, total=len(it)))
 
@@ -320,6 +339,14 @@ def run_basin(args):
         "label": b.label,
         "steps": b.steps,
     }
+    _stability(
+        args,
+        model,
+        z,
+        out,
+        "a perturbed walker leaves it, so its basin has no interior; points count as "
+        "converging only where they land on its stable manifold within --tol",
+    )
     if args.volume_samples > 0:
         v = basin_volume(
             model,
@@ -455,6 +482,14 @@ def run_push(args):
     angles = np.radians(np.asarray(args.directions_deg, float))
     D = push_sensitivity_autodiff(model, x_star, period, jnp.asarray(phases))
     out = {"gait": zn, "period": period, "phases": phases, "sensitivity_dxplus_dP": D}
+    _stability(
+        args,
+        model,
+        z,
+        out,
+        "even an unpushed walker perturbed by rounding leaves it, so the largest push "
+        "survived measures the step budget (--steps), not robustness",
+    )
     if args.check:
         from ..hybrid import step
 
