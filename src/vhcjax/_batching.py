@@ -129,9 +129,10 @@ def map_in_order(fn, items, workers=1, progress=None):
         return [r for _, r in zip(ticks, results)]
 
 
-def in_chunks(fn, n, chunk, workers=1, stage="batch", progress=None):
+def in_chunks(fn, n, chunk, workers=1, stage="batch", progress=None, to_host=False):
     """`fn(i, j)` on the slices `[i, j)` of a batch of `n`, `chunk` at a time, results
-    concatenated along the batch axis (a host loop: each call is one dispatch).
+    concatenated along the batch axis (a host loop: each call is one dispatch; numpy
+    concatenation with `to_host`, for results that `fn` fetched to the host).
 
     With `workers > 1`, up to `workers` chunks run at once (`map_in_order`), for a CPU
     where each program runs on one core (see `host_workers`). The chunks are independent,
@@ -152,7 +153,10 @@ def in_chunks(fn, n, chunk, workers=1, stage="batch", progress=None):
     if progress is None and _PROGRESS.get() is not None and len(bounds) > 1:
         progress = ticks
     parts = map_in_order(lambda b: jax.block_until_ready(fn(*b)), bounds, workers, progress)
-    return jax.tree_util.tree_map(lambda *xs: jnp.concatenate(xs), *parts)
+    if len(parts) == 1:
+        return parts[0]
+    xp = np if to_host else jnp
+    return jax.tree_util.tree_map(lambda *xs: xp.concatenate(xs), *parts)
 
 
 def dispatch_size(n, max_chunk=MAX_DISPATCH, mesh=None):
@@ -161,7 +165,9 @@ def dispatch_size(n, max_chunk=MAX_DISPATCH, mesh=None):
     return round_to_devices(min(bucket_size(n), max_chunk), mesh)
 
 
-def padded_map(fn, *args, max_chunk=MAX_DISPATCH, mesh=None, stage="batch", progress=None):
+def padded_map(
+    fn, *args, max_chunk=MAX_DISPATCH, mesh=None, stage="batch", progress=None, to_host=False
+):
     """`fn(*args)` for a batch of `n` members (the leading axis of the leaves of `args`),
     run in chunks of one padded size: the library's one padding rule.
 
@@ -177,7 +183,8 @@ def padded_map(fn, *args, max_chunk=MAX_DISPATCH, mesh=None, stage="batch", prog
     `fn` maps arrays with a leading axis of the chunk size to a pytree of arrays with the
     same leading axis (typically a jitted `vmap`).
 
-    **Returns:** the results of the `n` members, concatenated along the batch axis.
+    **Returns:** the results of the `n` members, concatenated along the batch axis (numpy
+    arrays with `to_host=True`: each chunk is fetched to the host and cut there).
     """
     n = jax.tree_util.tree_leaves(args)[0].shape[0]
     size = dispatch_size(n, max_chunk, mesh)
@@ -186,12 +193,18 @@ def padded_map(fn, *args, max_chunk=MAX_DISPATCH, mesh=None, stage="batch", prog
         m = j - i
 
         def pad(a):
-            a = jnp.asarray(a[i:j])
+            if m == size == n:  # the whole batch in one chunk: nothing to cut
+                return a
+            # host arrays are cut and padded on the host: no small programs to compile
+            xp = np if isinstance(a, np.ndarray) else jnp
+            a = a[i:j] if xp is np else jnp.asarray(a[i:j])
             if m == size:
                 return a
-            return jnp.concatenate([a, jnp.repeat(a[:1], size - m, axis=0)])
+            return xp.concatenate([a, xp.repeat(a[:1], size - m, axis=0)])
 
         out = fn(*shard_batch(jax.tree_util.tree_map(pad, args), mesh))
-        return jax.tree_util.tree_map(lambda x: x[:m], out)
+        if to_host:
+            out = jax.device_get(out)
+        return out if m == size else jax.tree_util.tree_map(lambda x: x[:m], out)
 
-    return in_chunks(part, n, size, host_workers(mesh), stage, progress)
+    return in_chunks(part, n, size, host_workers(mesh), stage, progress, to_host)

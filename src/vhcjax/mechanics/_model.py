@@ -44,7 +44,8 @@ class WalkerModel(eqx.Module):
         for field in dataclasses.fields(self):
             value = getattr(self, field.name, None)
             if isinstance(value, float) or (isinstance(value, int) and not isinstance(value, bool)):
-                object.__setattr__(self, field.name, jnp.asarray(value, dtype=float))
+                # a transfer, not a conversion program (compiled and looked up per process)
+                object.__setattr__(self, field.name, jax.device_put(np.float64(value)))
 
     #: Parameters that must be positive (masses, lengths, gravity) and that must not be
     #: negative (e.g. the slope), checked by `validate`; every float parameter must be

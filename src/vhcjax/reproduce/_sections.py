@@ -18,12 +18,13 @@ import numpy as np
 
 from .._results import result_names
 from ..gait import find_gaits, sweep
-from ..hybrid import DEFAULT_CONFIG, jacobian_jit, simulate, step_map_jit
+from ..hybrid import simulate
 from ..models import CompassGait
 from ..stability import (
     bifurcation_diagram,
     family_multipliers,
     period_doubling_slopes_from_diagram,
+    period_k_orbit,
 )
 from ._report import THESIS
 
@@ -484,7 +485,14 @@ def five(run, sec):
     _five_figures(sims, run.out_dir, sec)
     x = np.asarray(sims[-1].steps.x_plus)[-1]
     z = np.asarray(model.state_to_section(jnp.asarray(x)))
-    p4 = _period4(model, z)
+    o4 = period_k_orbit(model, z, 4)
+    p4 = {
+        "z": o4.z,
+        "periods": o4.periods,
+        "residual": o4.residual,
+        "multipliers": o4.multipliers,
+        "multipliers_fd": o4.multipliers_fd,
+    }
     # cross-check: the hybrid simulator from the orbit's first point returns after 4
     simc = _sim(model, np.asarray(model.section_to_state(jnp.asarray(p4["z"]))), S, dense=False)
     zc = np.asarray(jax.vmap(model.state_to_section)(simc.steps.x_plus))
@@ -880,47 +888,6 @@ def push(run, sec):
         "angles_deg": np.degrees(angles),
         "largest": res.largest,
         "sensitivity": D,
-    }
-
-
-def _period4(model, z, k=4, iterations=20, h=1e-6):
-    """Newton on $P^k(z) = z$ with the Jacobian composed from k one-step Jacobians (the
-    compiled k = 1 functions), multipliers of $P^k$ by autodiff and by central finite
-    differences of the composed map."""
-    cfg = DEFAULT_CONFIG
-
-    def Pk(zz, jac):
-        J = np.eye(len(zz))
-        periods = []
-        for _ in range(k):
-            if jac:
-                J = np.asarray(jacobian_jit(model, jnp.asarray(zz), 1, cfg)) @ J
-            r = step_map_jit(model, jnp.asarray(zz), 1, cfg)
-            periods.append(float(r.periods[0]))
-            zz = np.asarray(r.z_next)
-        return zz, J, periods
-
-    z = np.asarray(z, float)
-    res = float("inf")
-    for _ in range(iterations):
-        zk, J, periods = Pk(z, True)
-        r = zk - z
-        res = float(np.max(np.abs(r)))
-        if res < 1e-12:
-            break
-        z = z - np.linalg.solve(J - np.eye(len(z)), r)
-    zk, J, periods = Pk(z, True)
-    res = float(np.max(np.abs(zk - z)))
-    eye = np.eye(len(z))
-    Jfd = np.stack(
-        [(Pk(z + h * e, False)[0] - Pk(z - h * e, False)[0]) / (2 * h) for e in eye], axis=1
-    )
-    return {
-        "z": z,
-        "periods": np.asarray(periods),
-        "residual": res,
-        "multipliers": _sorted_ev(np.linalg.eigvals(J)),
-        "multipliers_fd": _sorted_ev(np.linalg.eigvals(Jfd)),
     }
 
 

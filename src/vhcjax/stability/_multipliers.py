@@ -246,6 +246,7 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, transverse=Tru
         zs,
         mesh=mesh,
         stage="multipliers",
+        to_host=True,
     )
     return jax.device_get(out)
 
@@ -551,19 +552,46 @@ def settle(model, z0, num_steps=400, config=FAST_CONFIG):
 _simulate_jit = simulate  # already jitted
 
 
-def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG):
+def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG, *, iterations=20, h=1e-6):
     """Newton on $P^k(z) = z$ from `z0` (e.g. from `settle`), with multipliers of $P^k$
-    by autodiff and by central finite differences."""
-    fp = _fixed_point_jit(model, jnp.asarray(z0, float), k, config=config)
-    z = np.asarray(fp.z)
-    orbit = [z]
-    zz = jnp.asarray(z)
-    for _ in range(k - 1):
-        zz = _step_map_jit(model, zz, 1, config).z_next
-        orbit.append(np.asarray(zz))
-    orbit = np.stack(orbit)
-    J = _jacobian_jit(model, fp.z, k, config)
-    Jfd = finite_difference_jacobian_jit(model, fp.z, k, 1e-6, config)
+    by autodiff and by central finite differences.
+
+    $P^k$ and its Jacobian are composed from $k$ one-step maps and one-step Jacobians
+    (autodiff through each heel strike): the one-step programs serve every $k$, where a
+    program per $k$ would be compiled for each (2.8x slower for $k = 4$ in a fresh
+    process). Newton stops at a residual below 1e-12 (`successful`), after `iterations`
+    (`not_converged`), or at a failed step (its code).
+    """
+
+    def Pk(z, jac):
+        J, orbit, periods, code = np.eye(len(z)), [], [], RESULTS.successful
+        for _ in range(k):
+            orbit.append(z)
+            if jac:
+                J = np.asarray(_jacobian_jit(model, jnp.asarray(z), 1, config)) @ J
+            r = _step_map_jit(model, jnp.asarray(z), 1, config)
+            periods.append(float(r.periods[0]))
+            if code == RESULTS.successful:
+                code = r.result
+            z = np.asarray(r.z_next)
+        return z, J, np.stack(orbit), np.asarray(periods), code
+
+    z = np.asarray(z0, float)
+    for _ in range(iterations):
+        zk, J, orbit, periods, code = Pk(z, True)
+        res = float(np.max(np.abs(zk - z)))
+        if code != RESULTS.successful or not np.isfinite(res) or res < 1e-12:
+            break
+        z = z - np.linalg.solve(J - np.eye(len(z)), zk - z)
+    else:
+        zk, J, orbit, periods, code = Pk(z, True)
+        res = float(np.max(np.abs(zk - z)))
+    if code == RESULTS.successful and not res < 1e-12:
+        code = RESULTS.not_converged
+    eye = np.eye(len(z))
+    Jfd = np.stack(
+        [(Pk(z + h * e, False)[0] - Pk(z - h * e, False)[0]) / (2 * h) for e in eye], axis=1
+    )
     minimal = k
     for j in range(1, k):
         if k % j == 0 and np.max(np.abs(orbit[j] - orbit[0])) < 1e-7:
@@ -572,11 +600,11 @@ def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG):
     return PeriodKOrbit(
         z,
         orbit,
-        np.asarray(fp.periods),
+        periods,
         np.asarray(_sort(jnp.linalg.eigvals(J))),
         np.asarray(_sort(jnp.linalg.eigvals(Jfd))),
-        float(fp.residual),
-        fp.result,
+        res,
+        code,
         minimal,
     )
 
