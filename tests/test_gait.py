@@ -343,6 +343,19 @@ def test_newton_jacobians_match_finite_differences(gaits, fam):
 def test_bad_input_and_labels():
     g = G.find_gait(vj.CompassGait(mH=-1.0), "stable", guess=SEED, throw=False)
     assert vj.result_names(g.result) == "bad_input"
+    # without a guess (the homotopy from the default model) and without a numpy warning;
+    # nothing was computed, so every number is the placeholder 0, not a made-up period
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        g = G.find_gait(vj.CompassGait(mH=-1.0), "stable", throw=False)
+    assert vj.result_names(g.result) == "bad_input"
+    assert float(g.T) == 0.0 and float(np.max(np.abs(np.asarray(g.x_plus)))) == 0.0
+    with pytest.raises(ValueError, match="guess must be finite"):
+        G.find_gait(vj.CompassGait(), "stable", guess=jnp.array([np.nan, -1.0]))
+    g = G.find_gait(vj.CompassGait(), "stable", guess=jnp.array([np.nan, -1.0]), throw=False)
+    assert vj.result_names(g.result) == "bad_input"
     with pytest.raises(ValueError):
         G.find_gait(vj.CompassGait(), "sideways", guess=SEED)
     with pytest.raises(ValueError):

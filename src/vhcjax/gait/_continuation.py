@@ -164,19 +164,22 @@ def _homotopy_steps(start, end):
     that no parameter changes by more than `_HOMOTOPY_RATIO` (relative) in one step."""
     import numpy as np
 
-    spread = max(
-        float(
-            np.max(
-                np.abs(
-                    np.log(
-                        np.asarray(getattr(end, name), float)
-                        / np.asarray(getattr(start, name), float)
+    with np.errstate(invalid="ignore", divide="ignore"):  # an invalid model: bad_input
+        spread = max(
+            float(
+                np.max(
+                    np.abs(
+                        np.log(
+                            np.asarray(getattr(end, name), float)
+                            / np.asarray(getattr(start, name), float)
+                        )
                     )
                 )
             )
+            for name in _HOMOTOPY_LEAVES
         )
-        for name in _HOMOTOPY_LEAVES
-    )
+    if not np.isfinite(spread):  # the search codes the model bad_input
+        return _HOMOTOPY_STEPS
     return max(_HOMOTOPY_STEPS, int(np.ceil(spread / np.log1p(_HOMOTOPY_RATIO))) + 1)
 
 

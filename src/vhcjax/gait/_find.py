@@ -4,7 +4,9 @@ import warnings
 
 import equinox as eqx
 import jax
+import jax.core
 import jax.numpy as jnp
+import numpy as np
 
 from .._batching import bucket_size, device_multiple, dispatch_size, host_workers, padded_map
 from .._programs import stored_jit
@@ -28,7 +30,8 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
     - `guess`: $(a_0, b_0)$ (or $(a_0, b_0, f_0)$ for shooting). `None`: continue the
       known default-model gait to `model` (homotopy in the parameters).
     - `solver`: VHC only: `"newton"` (default), `"lm"`, `"optimistix"` or `"optax"`.
-    - `throw`: raise if no gait was found.
+    - `throw`: raise if no gait was found (a `ValueError` at once for a non-finite
+      guess; with `throw=False` that member is coded `bad_input`).
 
     Differentiable (`jax.grad`, `jax.jacfwd`, ...) with respect to every model parameter:
     exact derivatives by the implicit function theorem at the gait, never through the
@@ -43,6 +46,10 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
     else:
         guess = detach(jnp.asarray(guess, dtype=float))
         _check_guess_shape(guess.shape, (), "guess")
+        if throw and not isinstance(guess, jax.core.Tracer):
+            values = np.asarray(guess)
+            if not np.all(np.isfinite(values)):  # one line now, not a runtime error later
+                raise ValueError(f"guess must be finite, got {values.tolist()}")
         gait = _search_one_jit(model, guess, family_sign(family), method, solver)
         gait = _relabel(gait, family)
     gait = _clean_failed(gait, guess)
@@ -217,8 +224,9 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord):
 @eqx.filter_jit  # one small program, not a dozen operations dispatched one by one
 def _clean_failed(gaits, guesses, B=None):
     """Members with a non-finite guess are `bad_input`; failed members hold no NaN or inf:
-    their numbers are placeholders (0 where not finite), the code says why. `B`: batch
-    size (`None`: one gait, `guesses` one guess)."""
+    their numbers are placeholders (0 where not finite; all 0 for `bad_input`, where
+    nothing was computed), the code says why. `B`: batch size (`None`: one gait,
+    `guesses` one guess)."""
     if guesses is not None and B is None:
         gaits = eqx.tree_at(
             lambda g: g.result,
@@ -230,11 +238,13 @@ def _clean_failed(gaits, guesses, B=None):
         code = jax.vmap(lambda f, r: RESULTS.where(f, r, RESULTS.bad_input))(finite, gaits.result)
         gaits = eqx.tree_at(lambda g: g.result, gaits, code)
     failed = gaits.result != RESULTS.successful
+    bad = gaits.result == RESULTS.bad_input
 
     def clean(x):
         if not eqx.is_inexact_array(x) or jnp.ndim(x) < failed.ndim:
             return x
         f = failed.reshape(failed.shape + (1,) * (x.ndim - failed.ndim))
-        return jnp.where(f & ~jnp.isfinite(x), 0.0, x)
+        b = bad.reshape(bad.shape + (1,) * (x.ndim - bad.ndim))
+        return jnp.where((f & ~jnp.isfinite(x)) | b, 0.0, x)
 
     return jax.tree_util.tree_map(clean, gaits)
