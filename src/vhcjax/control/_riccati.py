@@ -118,8 +118,9 @@ def _sym(X):
     return 0.5 * (X + X.T)
 
 
-def _phase_hamiltonian(model, d, P, Q, Rinv, domain):
-    """Vector field in $s$ of the orbit and the Hamiltonian matrix in free coordinates."""
+def _phase_functions(model, d, P, domain):
+    """`(matrices, orbit)` of domain `d`: $(A, B, dt/ds)$ in free coordinates, and the
+    orbit's rate $dw_\\star/ds$, at phase `s` and orbit point `w`."""
     tp, delta = d.theta_plus, d.theta_minus - d.theta_plus
 
     def matrices(s, w):
@@ -171,7 +172,7 @@ def riccati_backward(
     def sweeper(i):
         d, P = doms[i], bases[i]
         r = Qs[i].shape[0]
-        matrices, orbit = _phase_hamiltonian(model, d, P, Q, Rinv, dom(i))
+        matrices, orbit = _phase_functions(model, d, P, dom(i))
         Qi = Qs[i]
 
         def field(s, y, args):
@@ -253,7 +254,7 @@ def _orbit_rate(model, tp, delta, s, w, domain=None):
 def _hamiltonian_transitions(model, d, P, Q, Rinv, domain, rtol, atol, max_steps):
     """$\\Psi(s)$ on the phase grid of domain `d`: the transition matrix of the
     Hamiltonian system in free coordinates, from $\\Psi(0) = I$."""
-    matrices, orbit = _phase_hamiltonian(model, d, P, Q, Rinv, domain)
+    matrices, orbit = _phase_functions(model, d, P, domain)
     Qi = reduce(P, Q)
     r = Qi.shape[0]
     nw = d.w.shape[1]
