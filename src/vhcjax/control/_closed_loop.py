@@ -39,6 +39,7 @@ from ._transverse import (
     cycle_monodromy,
     phase_field,
     phase_matrices,
+    solve_in_phase,
     transverse_system,
 )
 
@@ -80,17 +81,7 @@ def closed_loop_multipliers_transverse(
             return jnp.concatenate([dw, (c * (A - B @ K) @ Phi).reshape(-1)])
 
         y0 = jnp.concatenate([d.w[0], jnp.eye(r).reshape(-1)])
-        sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(field),
-            diffrax.Tsit5(),
-            t0=0.0,
-            t1=1.0,
-            dt0=None,
-            y0=y0,
-            stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-            max_steps=max_steps,
-            throw=False,
-        )
+        sol = solve_in_phase(field, y0, 0.0, 1.0, diffrax.SaveAt(t1=True), rtol, atol, max_steps)
         assert sol.ys is not None  # saved at t1
         transitions.append(sol.ys[-1, nw:].reshape(r, r))
     M = cycle_monodromy(bases, k, transitions, [d.J for d in doms])

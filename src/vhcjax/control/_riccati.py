@@ -17,6 +17,14 @@ X(1^-) = J^TX(0^+)J + Q_J.$$
   symplectic jump $S_J = \\begin{bmatrix}J & 0\\\\ -J^{-T}Q_J & J^{-T}\\end{bmatrix}$
   ($J$ invertible): $X(0^+) = U_2U_1^{-1}$, then $X(s)$ from the Hamiltonian flow.
   The eigenvalues on that subspace are the closed-loop multipliers.
+
+A multi-domain gait (`HybridTransverseSystem`, e.g. the kneed walker) has one such
+equation per domain on the coordinates its locked joints leave free, and a reset per
+domain, $X_i(1^-) = J_i^TX_{i+1}(0^+)J_i$ (plus $Q_J$ at the heel strike), with $J_i$ not
+square where a joint locks or unlocks. The backward iteration runs through all of them;
+the Hamiltonian method cannot form $S_J$ there (the costate jump is a relation, not a
+map), so it solves for the costates after every reset in one linear system around the
+cycle and takes the monodromy at the start of the domain with the fewest coordinates.
 """
 
 import diffrax
@@ -33,6 +41,7 @@ from ._transverse import (
     phase_matrices,
     reduce,
     reduced_jump,
+    solve_in_phase,
 )
 
 
@@ -152,7 +161,8 @@ def riccati_backward(
 
     - `model`: the model of `system`.
     - `system`: a `TransverseSystem` or `HybridTransverseSystem` (then the equation
-      runs backward through every domain, with the jump weight at every reset).
+      runs backward through every domain and reset, the jump weight at the heel
+      strike only).
     - `Q`, `R`, `Q_jump`: weights (matrices or diagonals, on all $2n-1$ coordinates);
       default identities, and `Q_jump = Q`.
     - `tol`: stop when $\\max|\\Delta X(1^-)| \\le$ `tol` $(1 + \\max|X(1^-)|)$.
@@ -185,18 +195,7 @@ def riccati_backward(
 
         def sweep(X1, saveat):
             y0 = jnp.concatenate([d.w[-1], X1.reshape(-1)])
-            sol = diffrax.diffeqsolve(
-                diffrax.ODETerm(field),
-                diffrax.Tsit5(),
-                t0=1.0,
-                t1=0.0,
-                dt0=None,
-                y0=y0,
-                stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-                saveat=saveat,
-                max_steps=max_steps,
-                throw=False,
-            )
+            sol = solve_in_phase(field, y0, 1.0, 0.0, saveat, rtol, atol, max_steps)
             assert sol.ys is not None
             return sol.ys[..., d.w.shape[1] :].reshape(*sol.ys.shape[:-1], r, r), sol.result
 
@@ -267,18 +266,7 @@ def _hamiltonian_transitions(model, d, P, Q, Rinv, domain, rtol, atol, max_steps
         return jnp.concatenate([orbit(s, w), (c * H @ Z).reshape(-1)])
 
     y0 = jnp.concatenate([d.w[0], jnp.eye(2 * r).reshape(-1)])
-    sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(field),
-        diffrax.Tsit5(),
-        t0=0.0,
-        t1=1.0,
-        dt0=None,
-        y0=y0,
-        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-        saveat=diffrax.SaveAt(ts=d.s),
-        max_steps=max_steps,
-        throw=False,
-    )
+    sol = solve_in_phase(field, y0, 0.0, 1.0, diffrax.SaveAt(ts=d.s), rtol, atol, max_steps)
     assert sol.ys is not None  # saved at `ts`
     return sol.ys[:, nw:].reshape(-1, 2 * r, 2 * r), sol.result
 

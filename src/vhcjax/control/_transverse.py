@@ -144,46 +144,27 @@ def _solve_code(sol):
     )
 
 
-class _Tab(eqx.Module):
-    s: jax.Array
-    theta_plus: jax.Array
-    theta_minus: jax.Array
-    w: jax.Array
-    dw: jax.Array
-    A: jax.Array
-    B: jax.Array
-    dt_ds: jax.Array
-    period: jax.Array
-    J: jax.Array
-    Phi: jax.Array
-    x_minus: jax.Array
-    x_next: jax.Array
-    result: RESULTS
-
-    def system(self, x_plus, multipliers, closure):
-        return TransverseSystem(
-            self.s,
-            self.theta_plus,
-            self.theta_minus,
-            self.w,
-            self.dw,
-            self.A,
-            self.B,
-            self.dt_ds,
-            self.period,
-            self.J,
-            self.Phi,
-            multipliers,
-            x_plus,
-            self.x_minus,
-            closure,
-            self.result,
-        )
+def solve_in_phase(field, y0, t0, t1, saveat, rtol, atol, max_steps):
+    """`diffeqsolve` of `field` over the phase from `t0` to `t1` (either way): Tsit5 with
+    a PID controller, failures as diffrax result codes."""
+    return diffrax.diffeqsolve(
+        diffrax.ODETerm(field),
+        diffrax.Tsit5(),
+        t0=t0,
+        t1=t1,
+        dt0=None,
+        y0=y0,
+        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        saveat=saveat,
+        max_steps=max_steps,
+        throw=False,
+    )
 
 
-def _tabulate(model, x_start, theta_minus, num_points, domain):
-    """The orbit from `x_start` to the section $q_1 = $ `theta_minus`, with $A$, $B$,
-    $dt/ds$ and $\\Phi$ on the phase grid, and the jump at its end (one domain)."""
+def _tabulate(model, x_start, theta_minus, num_points, domain, x_next):
+    """The `TransverseSystem` of one domain: the orbit from `x_start` to the section
+    $q_1 = $ `theta_minus`, with $A$, $B$, $dt/ds$ and $\\Phi$ on the phase grid, the jump
+    at its end, and its closure against `x_next` (the state the reset should reach)."""
     r = x_start.shape[0] - 1
     m = num_inputs(model)
     u0 = jnp.zeros(m, x_start.dtype)
@@ -228,7 +209,24 @@ def _tabulate(model, x_start, theta_minus, num_points, domain):
     code = _solve_code(sol)
     finite = jnp.all(jnp.isfinite(J)) & jnp.all(jnp.isfinite(Phi)) & jnp.all(jnp.isfinite(A))
     code = RESULTS.where((code == RESULTS.successful) & ~finite, RESULTS.nonfinite, code)
-    return _Tab(s, theta_plus, theta_minus, w, dw, A, B, c, ys[-1, r], J, Phi, x_minus, xp, code)
+    return TransverseSystem(
+        s,
+        theta_plus,
+        theta_minus,
+        w,
+        dw,
+        A,
+        B,
+        c,
+        ys[-1, r],
+        J,
+        Phi,
+        _sorted_eigvals(J @ Phi),
+        x_start,
+        x_minus,
+        jnp.max(jnp.abs(xp - x_next)),
+        code,
+    )
 
 
 def _sorted_eigvals(M):
@@ -258,9 +256,7 @@ def transverse_system(model, x_plus, *, num_points=401):
     # The impact leaves the configuration unchanged and relabelling is an involution on
     # configurations, so the pre-impact configuration is the relabelled post-impact one.
     q_minus = model.relabel(x_plus[:n], jnp.zeros(n, x_plus.dtype))[0]
-    t = _tabulate(model, x_plus, q_minus[0], num_points, None)
-    closure = jnp.max(jnp.abs(t.x_next - x_plus))
-    return t.system(x_plus, _sorted_eigvals(t.J @ t.Phi), closure)
+    return _tabulate(model, x_plus, q_minus[0], num_points, None, x_plus)
 
 
 class HybridTransverseSystem(eqx.Module):
@@ -346,25 +342,20 @@ def cycle_monodromy(bases, start, transitions, jumps):
 def _hybrid_transverse_system(model, x_plus, num_points):
     _, info = multidomain_step(model, x_plus, SolverConfig(rtol=1e-12, atol=1e-12, max_steps=8192))
     D = model.num_domains
-    tabs = [_tabulate(model, info.x_start[i], info.x_end[i][0], num_points, i) for i in range(D)]
+    nexts = [info.x_start[i + 1] for i in range(D - 1)] + [x_plus]
+    domains = tuple(
+        _tabulate(model, info.x_start[i], info.x_end[i][0], num_points, i, nexts[i])
+        for i in range(D)
+    )
     bases = tuple(domain_basis(model, i) for i in range(D))
     sizes = [x_plus.shape[0] - 1 if P is None else P.shape[1] for P in bases]
     k = int(np.argmin(sizes))
-    domains = []
-    closures = []
-    code = RESULTS.where(
-        info.result._value[-1] == RESULTS.successful._value,
-        RESULTS.successful,
-        RESULTS.not_converged,
-    )
-    for i, t in enumerate(tabs):
-        nxt = x_plus if i == D - 1 else info.x_start[i + 1]
-        closure = jnp.max(jnp.abs(t.x_next - nxt))
-        closures.append(closure)
-        code = RESULTS.where(code == RESULTS.successful, t.result, code)
-        domains.append(t.system(info.x_start[i], _sorted_eigvals(t.J @ t.Phi), closure))
+    # the passive cycle's first failure (e.g. a state that is not on a gait)
+    code = eqx.tree_at(lambda c: c._value, RESULTS.successful, info.result._value[-1])
+    for d in domains:
+        code = RESULTS.where(code == RESULTS.successful, d.result, code)
     M = cycle_monodromy(
-        bases, k, [reduce(P, t.Phi) for P, t in zip(bases, tabs)], [t.J for t in tabs]
+        bases, k, [reduce(P, d.Phi) for P, d in zip(bases, domains)], [d.J for d in domains]
     )
     return HybridTransverseSystem(
         tuple(domains),
@@ -372,6 +363,6 @@ def _hybrid_transverse_system(model, x_plus, num_points):
         k,
         _sorted_eigvals(M),
         x_plus,
-        jnp.max(jnp.stack(closures)),
+        jnp.max(jnp.stack([d.closure for d in domains])),
         code,
     )

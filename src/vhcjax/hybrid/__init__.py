@@ -12,6 +12,7 @@ from ._multidomain import (
     DomainView as DomainView,
     MultiDomainModel as MultiDomainModel,
     augmented_impact_locked as augmented_impact_locked,
+    dense_cycle as dense_cycle,
     lock_impact as lock_impact,
     locked_acceleration as locked_acceleration,
     multidomain_step as multidomain_step,

@@ -253,9 +253,10 @@ def multidomain_step(model, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None,
     return StepResult(x_minus, x_plus, total, impulse, code), info
 
 
-def _domain_grids(model, info, num_points, config):
+def _domain_grids(model, info, num_points, config, fields=None):
     """States on `num_points` equally spaced times of each domain of a cycle (`info`); a
-    domain not reached (the cycle failed before it) holds the last state reached."""
+    domain not reached (the cycle failed before it) holds the last state reached.
+    `fields`: the cycle's vector fields, if not the model's (as `multidomain_step`)."""
     ts_all, xs_all = [], []
     for i in range(model.num_domains):
         dur = info.duration[i]
@@ -267,6 +268,7 @@ def _domain_grids(model, info, num_points, config):
             config,
             saveat=diffrax.SaveAt(ts=ts),
             event=False,
+            vector_field=None if fields is None else fields[i],
         )
         ys = sol.ys
         assert ys is not None  # saved at `ts`
@@ -289,13 +291,14 @@ def multidomain_trajectory(model, x0, num_points=50, config=DEFAULT_CONFIG):
     return ts, xs, info
 
 
-def dense_cycle(model, x0, num_points, config=DEFAULT_CONFIG, alive=True):
+def dense_cycle(model, x0, num_points, config=DEFAULT_CONFIG, alive=True, fields=None):
     """One cycle and its states on `num_points` times per domain, joined, as
     `vhcjax.simulate(..., dense_points=num_points)` returns them for a multi-domain model.
+    `fields`: vector fields per domain replacing the model's (as `multidomain_step`).
 
     **Returns:** `(StepResult, ts, xs)`: the cycle (as `multidomain_step`), times from its
     start (shape `(num_domains * num_points,)`) and states (`(..., 2n)`)."""
-    sr, info = multidomain_step(model, x0, config, alive)
-    ts, xs = _domain_grids(model, info, num_points, config)
+    sr, info = multidomain_step(model, x0, config, alive, None, fields)
+    ts, xs = _domain_grids(model, info, num_points, config, fields)
     starts = jnp.concatenate([jnp.zeros(1, ts.dtype), jnp.cumsum(info.duration)[:-1]])
     return sr, (ts + starts[:, None]).reshape(-1), xs.reshape(-1, xs.shape[-1])

@@ -557,10 +557,10 @@ def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG, *, iterations=20, h=1e-6
     by autodiff and by central finite differences.
 
     $P^k$ and its Jacobian are composed from $k$ one-step maps and one-step Jacobians
-    (autodiff through each heel strike): the one-step programs serve every $k$, where a
-    program per $k$ would be compiled for each (2.8x slower for $k = 4$ in a fresh
-    process). Newton stops at a residual below 1e-12 (`successful`), after `iterations`
-    (`not_converged`), or at a failed step (its code).
+    (autodiff through each heel strike): the compiled one-step programs serve every $k$.
+    Newton stops at a residual below 1e-12 (`successful`), after `iterations`
+    (`not_converged`), or at a failed step (its code; `residual` is then `inf`: the
+    failed map holds its state, which is no convergence).
     """
 
     def Pk(z, jac):
@@ -588,6 +588,8 @@ def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG, *, iterations=20, h=1e-6
         res = float(np.max(np.abs(zk - z)))
     if code == RESULTS.successful and not res < 1e-12:
         code = RESULTS.not_converged
+    if code != RESULTS.successful and not code == RESULTS.not_converged:
+        res = float("inf")
     eye = np.eye(len(z))
     Jfd = np.stack(
         [(Pk(z + h * e, False)[0] - Pk(z - h * e, False)[0]) / (2 * h) for e in eye], axis=1
