@@ -64,6 +64,7 @@ _GROUPS = {
 _LONGEST_FIRST = (
     "design",
     "control",
+    "test_kneed_control.py",
     "sweep",
     "test_stability.py",
     "test_reproduce.py",
