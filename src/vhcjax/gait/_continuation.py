@@ -1,5 +1,6 @@
-"""Continuation: homotopy in the model parameters from a known gait, with a tangent
-predictor (implicit differentiation of the residual)."""
+"""Continuation: homotopy in the model parameters from a known gait (secant predictor),
+and the tangent of a gait along a parameter path (implicit differentiation of the
+residual)."""
 
 import equinox as eqx
 import jax
@@ -55,45 +56,43 @@ def _path(start, end):
     return path
 
 
-def _continue(start, end, s_buf, n, z0, sign, method):
+def _continue(start, end, s_buf, n, z0, sign, method, s_prev=None, z_prev=None):
     """Follow the solution of the model `_path(start, end)(s)` through `s_buf[:n]`
     (a `fori_loop` with a dynamic length over a fixed-size buffer), from the seed `z0` at
-    `s_buf[0]`, with a tangent predictor. The first point is the seed's own parameter, so
-    it needs no tangent: each tangent comes from the point just solved (one copy of the
-    residual's Jacobian in the program). A failed point does not move the anchor: the
-    next one is predicted from the last success.
+    `s_buf[0]`, with a secant predictor: the line through the last two points solved,
+    the first of them `(s_prev, z_prev)` if given (the first step from the seed alone
+    starts at the seed). A failed point does not move the line: the next one is
+    predicted from the last two successes.
 
-    **Returns:** a batched `Gait` (one per buffer entry; entries from `n` on are unset)
-    and the tangents $dz^*/ds$ (zero where the search failed).
+    **Returns:** a batched `Gait` (one per buffer entry; entries from `n` on are unset).
     """
     path = _path(start, end)
     s0 = s_buf[0]
-    t0 = jnp.zeros_like(z0)
     shape = jax.eval_shape(lambda: _search(path(s0), z0, sign, method))
     buf = jax.tree_util.tree_map(lambda l: jnp.zeros((s_buf.shape[0],) + l.shape, l.dtype), shape)
-    tbuf = jnp.zeros((s_buf.shape[0], z0.shape[0]), z0.dtype)
 
     def body(i, carry):
-        s_good, z_good, t_good, buf, tbuf = carry
+        s_prev, z_prev, s_good, z_good, buf = carry
         s = s_buf[i]
-        gait = _search(path(s), z_good + t_good * (s - s_good), sign, method)
+        slope = jnp.where(s_good != s_prev, (z_good - z_prev) / (s_good - s_prev), 0.0)
+        gait = _search(path(s), z_good + slope * (s - s_good), sign, method)
         ok = gait.result == RESULTS.successful
         z_new = _unknowns(gait, method)
-        t_new = _tangent(path, s, z_new, sign, method)
-        ok_t = ok & jnp.any(t_new != 0)
         buf = jax.tree_util.tree_map(lambda b, v: b.at[i].set(v), buf, gait)
-        tbuf = tbuf.at[i].set(jnp.where(ok, t_new, 0.0))
+        # a point equal to the last success (the seed re-solved) keeps the older one
+        move = ok & (s != s_good)
         return (
+            jnp.where(move, s_good, s_prev),
+            jnp.where(move, z_good, z_prev),
             jnp.where(ok, s, s_good),
             jnp.where(ok, z_new, z_good),
-            jnp.where(ok_t, t_new, t_good),
             buf,
-            tbuf,
         )
 
-    init = (s0, z0, t0, buf, tbuf)
-    _, _, _, buf, tbuf = jax.lax.fori_loop(0, n, body, init)
-    return buf, tbuf
+    if s_prev is None:
+        s_prev, z_prev = s0, z0
+    init = (jnp.asarray(s_prev, s0.dtype), jnp.asarray(z_prev, z0.dtype), s0, z0, buf)
+    return jax.lax.fori_loop(0, n, body, init)[-1]
 
 
 _continue_jit = stored_jit(_continue)
@@ -107,15 +106,18 @@ _CHUNK = 16
 def _run_continuation(start, end, s_values, z0, sign, method):
     """Host wrapper: run `_continue` over `s_values` in calls of `_CHUNK` points. Each call
     after the first starts again from the last point solved (re-solved as its first entry,
-    dropped, with its tangent computed again), so the result is that of one long loop up
-    to rounding. **Returns:** the gaits and tangents as numpy arrays (host side).
+    dropped) with the secant line through it and the success before, so the result is
+    that of one long loop up to rounding. **Returns:** the gaits as numpy arrays (host
+    side).
     """
     import numpy as np
 
     s_values = np.asarray(s_values, dtype=float)
+    z0 = np.asarray(z0, dtype=float)
     n = len(s_values)
-    parts, tangent_parts = [], []
+    parts = []
     s_start, z_start, done = s_values[0], z0, 0
+    s_prev, z_prev = s_start, z_start
     while done < n:
         first = done == 0
         new = s_values[done : done + (_CHUNK if first else _CHUNK - 1)]
@@ -123,25 +125,23 @@ def _run_continuation(start, end, s_values, z0, sign, method):
         k = len(s_run)
         s_buf = np.concatenate([s_run, np.full(_CHUNK - k, s_run[-1])])
         # `k` traced: a short last call shares the program.
-        out = _continue_jit(start, end, s_buf, np.asarray(k), z_start, sign, method)
+        out = _continue_jit(
+            start, end, s_buf, np.asarray(k), z_start, sign, method, np.asarray(s_prev), z_prev
+        )
         skip = 0 if first else 1
-        gaits, tangents = jax.tree_util.tree_map(lambda x: x[skip:k], jax.device_get(out))
+        gaits = jax.tree_util.tree_map(lambda x: x[skip:k], jax.device_get(out))
         parts.append(gaits)
-        tangent_parts.append(tangents)
+        # the last two successes so far carry the secant line into the next call
         ok = np.flatnonzero(np.asarray(gaits.result._value) == RESULTS.successful._value)
-        if ok.size:
-            i = ok[-1]
-            last = (
-                (gaits.a[i], gaits.b[i])
-                if method == "vhc"
-                else (gaits.a[i], gaits.b[i], gaits.f[i])
-            )
-            s_start, z_start = new[i], np.asarray(last)
+        solved = [(s_prev, z_prev), (s_start, z_start)] + [
+            (new[i], np.asarray(_unknowns(jax.tree_util.tree_map(lambda x: x[i], gaits), method)))
+            for i in ok[-2:]
+        ]
+        (s_prev, z_prev), (s_start, z_start) = solved[-2:]
         done += len(new)
         if n > _CHUNK:
             report("continuation", len(parts), 1 + -(-(n - _CHUNK) // (_CHUNK - 1)))
-    gaits = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *parts)
-    return gaits, np.concatenate(tangent_parts)
+    return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *parts)
 
 
 _HOMOTOPY_STEPS = 16
@@ -186,7 +186,7 @@ def _homotopy_steps(start, end):
 def continue_to_model(model, family="stable", method="vhc", num=None):
     """The `family` gait of `model` without a guess: homotopy from the default model at
     3 degrees (thesis Table 1, `reference_model`) to `model`, all physical parameters at
-    once (geometric interpolation), in `num` steps with a tangent predictor (`None`: at
+    once (geometric interpolation), in `num` steps with a secant predictor (`None`: at
     least 16, and no parameter changing by more than 1.5 % in a step).
 
     **Returns:** a `Gait` (never raises; check `result`).
@@ -197,7 +197,7 @@ def continue_to_model(model, family="stable", method="vhc", num=None):
     sign = family_sign(family)
     if num is None:
         num = _homotopy_steps(reference_model(), model)
-    gaits, _ = _run_continuation(
+    gaits = _run_continuation(
         reference_model(), model, np.linspace(0.0, 1.0, num), _seed(sign, method), sign, method
     )
     return _relabel(jax.tree_util.tree_map(lambda x: x[-1], gaits), family)

@@ -118,7 +118,7 @@ def _search_single(model, guesses, sign, method, solver, chord):
 
 def _from_reference(model, sign, method, num=_HOMOTOPY_STEPS):
     s_buf = jnp.linspace(0.0, 1.0, num)
-    gaits, _ = _continue(reference_model(), model, s_buf, num, _seed(sign, method), sign, method)
+    gaits = _continue(reference_model(), model, s_buf, num, _seed(sign, method), sign, method)
     return jax.tree_util.tree_map(lambda x: x[-1], gaits)
 
 

@@ -1,7 +1,7 @@
 """Slope sweeps: a family of gaits over many slopes.
 
-A coarse continuation over a few anchor slopes (tangent predictor) predicts the gait at
-every slope by Hermite interpolation of the anchors' gaits and tangents; the batched
+A coarse continuation over a few anchor slopes predicts the gait at every slope by
+Hermite interpolation of the anchors' gaits (slopes from finite differences); the batched
 Newton search (`find_gaits`) then solves the whole slope vector at once, and slopes it
 misses are retried from their nearest solved neighbour.
 """
@@ -124,6 +124,17 @@ def _anchor_grid(start, stop, step):
     return grid
 
 
+def _anchor_slopes(pa, za):
+    """$dz^*/d\\psi$ at the sorted anchors `pa` by finite differences of their gaits
+    `za` (second order, one-sided at the ends; zero for a single anchor): the anchors are
+    close, and the predictions they make only start Newton."""
+    import numpy as np
+
+    if len(pa) < 2:
+        return np.zeros_like(za)
+    return np.gradient(za, pa, axis=0, edge_order=2 if len(pa) > 2 else 1)
+
+
 def _hermite(ps, pa, za, ta):
     """Cubic Hermite interpolation of the anchors' gaits `za` and slopes `ta` (with respect
     to psi) at the sorted slopes `ps`; outside the anchors, the tangent line of the
@@ -174,10 +185,11 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
 
     1. The gait of `model` at 3 degrees, from the reference gait by homotopy in the
        model parameters (no guess needed).
-    2. A continuation with a tangent predictor from there to both ends of the slope
-       range, over anchor slopes at most `anchor_step` apart.
+    2. A continuation (secant predictor) from there to both ends of the slope range,
+       over anchor slopes at most `anchor_step` apart.
     3. Every slope at once by the batched Newton search (`find_gaits`), from the cubic
-       Hermite interpolation of the anchors' gaits and tangents $dz^*/d\psi$.
+       Hermite interpolation of the anchors' gaits, with $dz^*/d\psi$ from finite
+       differences between anchors.
     4. Slopes the batch missed are retried from their nearest solved slope (its gait and
        tangent), a few rounds.
 
@@ -207,19 +219,18 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
 
     # 2. coarse continuation from there over the slope range (path psi = p0 e^s)
     end = _with_psi(model, p0 * math.e)
-    pa, za, ta = [], [], []
+    pa, za = [], []
     for grid in (
         _anchor_grid(p0, max(ps[-1], p0), anchor_step),
         _anchor_grid(p0, min(ps[0], p0), anchor_step),
     ):
-        g, t = _run_continuation(anchor_model, end, np.log(grid / p0), z0, sign, method)
+        g = _run_continuation(anchor_model, end, np.log(grid / p0), z0, sign, method)
         ok = np.asarray(g.result._value) == RESULTS.successful._value
         # A sequential continuation past a failure is unreliable: keep the run up to it.
         n_ok = len(ok) if ok.all() else int(np.argmin(ok))
         z = np.asarray(jax.vmap(lambda gg: _unknowns(gg, method))(g))
         pa += list(grid[:n_ok])
         za += list(z[:n_ok])
-        ta += list(np.asarray(t)[:n_ok] / grid[:n_ok, None])  # d/dpsi = (d/ds) / psi
     if not pa:  # not even the first anchor: nothing to predict from
         gaits = find_gaits(
             model, np.repeat(np.asarray(z0)[None], len(ps), 0), family, method, psi=jnp.asarray(ps)
@@ -228,7 +239,8 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
         have = np.zeros(len(ps), bool)
     else:
         pa, uniq = np.unique(np.asarray(pa), return_index=True)
-        za, ta = np.asarray(za)[uniq], np.asarray(ta)[uniq]
+        za = np.asarray(za)[uniq]
+        ta = _anchor_slopes(pa, za)
         # 3. every slope at once
         guesses = _hermite(ps, pa, za, ta)
         gaits = find_gaits(model, jnp.asarray(guesses), family, method, psi=jnp.asarray(ps))
