@@ -267,6 +267,7 @@ def run_design(args):
             for h in res.history
         ],
         "projected_gradient": res.projected_gradient,
+        "result_reason": _REASONS[res.result],
         "units": {
             "value": "deg" if flip else ("m/s" if args.objective == "speed" else "-"),
             "gradient": "value units per parameter unit (kg, m, m/s^2)",
@@ -289,7 +290,21 @@ def run_design(args):
         )
         for k in vary:
             print(f"  {k:>9} {out['initial']['params'][k]:.6g} -> {o['params'][k]:.6g}")
-    return 0 if res.result in ("successful", "max_iterations") else 1
+    return 0 if res.result in ("successful", "max_iterations", "no_descent") else 1
+
+
+#: What each `DesignResult.result` means (the JSON's `result_reason`).
+_REASONS = {
+    "successful": "the projected gradient vanished (relative gtol)",
+    "max_iterations": "the iteration limit (--steps) was reached before the gradient vanished",
+    "no_descent": (
+        "no step along the gradient improves the objective: the design stopped at a point "
+        "where the objective is not differentiable (for the spectral radius, typically "
+        "where a complex pair of multipliers meets the real axis); its gradient need not "
+        "vanish there, and a grid over the bounds is the check of optimality"
+    ),
+    "no_gait": "no gait was found along the step from the last iterate",
+}
 
 
 def run_atlas(args):

@@ -47,6 +47,8 @@ DEFAULT_BOUNDS = {
     "gravity": (1.0, 20.0),
 }
 OBJECTIVES = ("spectral-radius", "flip-slope", "speed")
+#: Halvings of a step that finds no gait or makes the objective worse.
+_HALVINGS = 7
 #: +1: minimised as is; -1: maximised (the optimiser minimises -value).
 _SENSE = {"spectral-radius": 1.0, "flip-slope": -1.0, "speed": -1.0}
 
@@ -81,7 +83,8 @@ class DesignResult(eqx.Module):
 
     - `objective`, `vary`, `bounds`: as asked.
     - `result`: `"successful"` (projected gradient below tolerance), `"max_iterations"`,
-      or the failure that stopped it (e.g. `"no_gait"`).
+      `"no_descent"` (no step along the gradient improves the objective: a kink, see
+      `design`) or `"no_gait"` (no gait found along the step).
     - `initial`, `optimum`: dicts with `params` (all five parameters), `value`,
       `gradient` (per varied parameter, of the objective in its own units), and for the
       optimum `x0` (post-impact state) and `multipliers` (complex).
@@ -152,8 +155,12 @@ def design(
     - `callback`: called with each history entry (progress).
 
     Every iterate is a gait found by Newton from the previous iterate's gait
-    (continuation); an update whose gait is not found is halved (back toward the last
-    iterate) up to 6 times, else the design stops with `"no_gait"`.
+    (continuation), and no worse than the last: an update whose gait is not found, or
+    that makes the objective worse, is halved (back toward the last iterate) up to 7
+    times, else the design stops with `"no_gait"` (no gait found on the way) or
+    `"no_descent"` (gaits found, none better: the last iterate is within a 128th of a
+    step of a point the gradient cannot improve, typically a kink of the spectral
+    radius, where a complex pair of multipliers meets the real axis).
 
     **Returns:** a `DesignResult`.
     """
@@ -218,14 +225,17 @@ def design(
             break
         upd, state = opt.update(jnp.asarray(sense * grad * (hi - lo)), state)
         u_new = np.clip(u + np.asarray(upd), 0.0, 1.0)
-        for _ in range(7):
+        found = False
+        for _ in range(_HALVINGS + 1):
             x_new = lo + u_new * (hi - lo)
             v_new, grad_new, gait_new = _evaluate(base, vary, x_new, objective, guess)
-            if gait_new.result == RESULTS.successful and np.isfinite(v_new):
+            ok = bool(gait_new.result == RESULTS.successful) and np.isfinite(v_new)
+            found |= ok
+            if ok and sense * v_new <= sense * v:  # a gait, and no worse: accepted
                 break
             u_new = 0.5 * (u + u_new)
         else:
-            result = "no_gait"
+            result = "no_descent" if found else "no_gait"
             k -= 1
             break
         u, x, v, grad, gait = u_new, x_new, v_new, grad_new, gait_new
