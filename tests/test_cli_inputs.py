@@ -10,14 +10,17 @@ stop before JAX is used (they take milliseconds).
 import argparse
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
 import time
 
+import jax.numpy as jnp
 import numpy as np
 import pytest
 
+import vhcjax as vj
 from vhcjax._json import to_jsonable
 from vhcjax.cli import build_parser, main
 from vhcjax.cli._common import Parser, parse_range
@@ -111,6 +114,25 @@ def test_bad_numeric_value_one_line_exit_2(capsys, cmd, flag, nargs, value):
         (["simulate", "--animate", "walk.mp4"], ".gif"),
         (["gait", "--transverse", "--no-stability"], "--no-stability"),
         (["gait", "--model", "kneed", "--method", "shooting", "--transverse"], "Poincare map"),
+        (["sweep", "--slope-deg", "1:2:1e-300"], "1e+300 values"),
+        (["stabilize", "--q", "1e300,1,1"], "[1e-08, 1e+08]"),
+        (["stabilize", "--r", "1e-300"], "[1e-08, 1e+08]"),
+        (
+            ["design", "--objective", "speed", "--vary", "a", "--bounds", "a=0.1:1e300"],
+            "at most 1000",
+        ),
+        (
+            [
+                "design",
+                "--objective",
+                "speed",
+                "--vary",
+                "mass-hip",
+                "--bounds",
+                "mass-hip=1:40,mass-hip=2:30",
+            ],
+            "twice",
+        ),
     ],
 )
 def test_other_refusals(capsys, argv, message):
@@ -122,7 +144,7 @@ def test_other_refusals(capsys, argv, message):
 def test_range_never_passes_stop():
     assert parse_range("1:2:0.4") == pytest.approx([1.0, 1.4, 1.8])
     assert parse_range("1:2:0.5") == pytest.approx([1.0, 1.5, 2.0])
-    assert parse_range("0.1:0.3:0.1")[-1] == pytest.approx(0.3)
+    assert parse_range("0.1:0.3:0.1")[-1] == 0.3  # not 0.30000000000000004
     assert len(parse_range("0.5:6:0.1")) == 56
 
 
@@ -260,3 +282,40 @@ def test_no_gait_is_a_failed_computation_not_bad_input(capsys):
     assert main(["contraction", "--slope-deg", "29", "--quiet"]) == 1
     err = capsys.readouterr().err.strip()
     assert "no gait found" in err and "\n" not in err and "error" not in err
+
+
+_M = vj.CompassGait()
+_Z = jnp.array([0.2186688, -1.09238359, -0.37737395])
+
+
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (lambda: vj.stabilize(_M, _M.section_to_state(_Z)), "shape (3,)"),
+        (lambda: vj.transverse_system(_M, _Z), "shape (4,)"),
+        (lambda: vj.transverse_system(_M, _M.section_to_state(_Z), num_points=1), ">= 2"),
+        (lambda: vj.closed_loop_step(_M, _Z, vj.ZeroFeedback(1)), "shape (4,)"),
+        (lambda: vj.simulate_closed_loop(_M, jnp.zeros(6), vj.ZeroFeedback(1), 3), "(4,)"),
+        (
+            lambda: vj.simulate_closed_loop(_M, _M.section_to_state(_Z), vj.ZeroFeedback(1), -3),
+            "nonnegative",
+        ),
+        (lambda: vj.simulate(vj.KneedWalker(), jnp.zeros(6), -1), "nonnegative"),
+        (lambda: vj.period_k_orbit(_M, _Z, 0), "positive integer"),
+        (lambda: vj.period_k_orbit(_M, _Z, 2.5), "positive integer"),
+        (lambda: vj.period_k_orbit(_M, jnp.zeros(4), 2), "shape (3,)"),
+        (lambda: vj.design("speed", ["a"], steps=-5), "steps"),
+        (lambda: vj.design("speed", ["a"], learning_rate=float("nan")), "learning_rate"),
+        (lambda: vj.design("speed", ["a"], model=vj.KneedWalker()), "CompassGait"),
+        (lambda: vj.atlas(np.array([]), [1.0]), "non-empty"),
+        (lambda: vj.atlas([2.0], [1.0], step=0.0), "step"),
+        (lambda: vj.atlas([2.0], [1.0], gravity=-9.81), "gravity"),
+        (lambda: vj.atlas([2.0], [1.0], psi_start=0.1, psi_max=0.05), "psi_max"),
+    ],
+)
+def test_library_arguments_refused_in_one_line(call, message):
+    """Wrong shapes and arguments: a one-line ValueError naming what is expected, before
+    any tracing (no deep JAX error)."""
+    with pytest.raises(ValueError, match=re.escape(message)) as err:
+        call()
+    assert "\n" not in str(err.value)

@@ -77,6 +77,11 @@ def number(kind=float, *, lo=None, hi=None, lo_open=False, hi_open=False):
 FINITE = number(float)
 POSITIVE = number(float, lo=0.0, lo_open=True)
 NONNEGATIVE = number(float, lo=0.0)
+#: Largest magnitude of a state entry on the command line (rad, rad/s): far beyond any
+#: walking motion, and a bound that keeps the integrators' arithmetic finite.
+MAX_STATE = 1e3
+STATE = number(float, lo=-MAX_STATE, hi=MAX_STATE)
+HALF_WIDTH = number(float, lo=0.0, lo_open=True, hi=MAX_STATE)
 
 
 def count(lo=1, hi=100_000):
@@ -307,10 +312,11 @@ def parse_range(text, name="--slope-deg"):
     if step <= 0 or stop < start:
         raise CLIError(f"{name} needs STEP > 0 and STOP >= START, got {text!r}")
     # STOP is included when it lies within 1e-9 of a step of the grid; nothing past it.
-    n = math.floor((stop - start) / step + 1e-9) + 1
-    if n > 100_000:
-        raise CLIError(f"{name} {text!r} gives {n} values; at most 100000")
-    return [start + i * step for i in range(n)]
+    span = (stop - start) / step
+    if span >= 100_000:
+        raise CLIError(f"{name} {text!r} gives {span + 1:.4g} values; at most 100000")
+    n = math.floor(span + 1e-9) + 1
+    return [min(start + i * step, stop) for i in range(n)]
 
 
 def print_json(obj):

@@ -16,6 +16,7 @@ from ._common import (
     parse_range,
     print_json,
     progress,
+    warn,
 )
 
 PARAMETERS = ("mass-hip", "mass-leg", "a", "b", "gravity")
@@ -150,6 +151,10 @@ def parse_vary(text):
     return names
 
 
+#: Largest HI/LO of a design bound.
+MAX_BOUND_RATIO = 1e3
+
+
 def parse_bounds(text, vary):
     out = {}
     if not text:
@@ -163,9 +168,17 @@ def parse_bounds(text, vary):
         name = name.strip()
         if name not in vary:
             raise CLIError(f"--bounds: {name!r} is not in --vary")
+        if name in out:
+            raise CLIError(f"--bounds: {name} is given twice")
         check_finite("--bounds", lo, hi)
         if not 0 < lo < hi:
             raise CLIError(f"--bounds: {name} needs 0 < LO < HI, got {lo}:{hi}")
+        if hi / lo > MAX_BOUND_RATIO:
+            raise CLIError(
+                f"--bounds: {name} spans {hi / lo:.3g} x (HI/LO); at most {MAX_BOUND_RATIO:g}: "
+                "the design moves in parameters scaled to the bounds, and a wider box "
+                "leaves gradient steps too small to move"
+            )
         out[name] = (lo, hi)
     return out
 
@@ -230,6 +243,12 @@ def run_design(args):
     finally:
         bar.close()
     flip = args.objective == "flip-slope"
+    if not res.optimum["stable"]:
+        warn(
+            args,
+            f"the optimal gait is unstable (spectral radius "
+            f"{res.optimum['spectral_radius']:.4g}): the design left the stable walkers",
+        )
 
     def value(v):
         v = math.degrees(v) if flip else v
@@ -257,6 +276,8 @@ def run_design(args):
             "multipliers": [
                 [float(np.real(m)), float(np.imag(m))] for m in res.optimum["multipliers"]
             ],
+            "spectral_radius": res.optimum["spectral_radius"],
+            "stable": res.optimum["stable"],
         },
         "history": [
             {

@@ -6,8 +6,8 @@ import math
 from typing import Any
 
 from ._common import (
-    FINITE,
     KNEED_SEED,
+    STATE,
     CLIError,
     add_model_choice,
     add_model_flags,
@@ -60,7 +60,7 @@ def register(subparsers):
     _family_method(p, both=False)
     p.add_argument(
         "--guess",
-        type=FINITE,
+        type=STATE,
         nargs="+",
         metavar="X",
         help="initial guess for q1 (rad) and dq1 (rad/s) just after impact, e.g. "

@@ -4,8 +4,9 @@ import math
 
 from ._common import (
     FINITE,
+    HALF_WIDTH,
     KNEED_SEED,
-    POSITIVE,
+    STATE,
     CLIError,
     ComputationFailed,
     add_model_choice,
@@ -33,7 +34,7 @@ def _common(p, png_help):
     add_model_flags(p)
     p.add_argument(
         "--gait",
-        type=FINITE,
+        type=STATE,
         nargs=3,
         metavar=("Q1", "DQ1", "DQ2"),
         default=None,
@@ -126,7 +127,7 @@ def register(subparsers):
     p.add_argument("--axes", default="q1,dq1", help="two of q1,dq1,dq2 (default q1,dq1)")
     p.add_argument(
         "--half-widths",
-        type=POSITIVE,
+        type=HALF_WIDTH,
         nargs=2,
         default=[0.08, 0.4],
         help="grid half widths along the two axes (default 0.08 0.4)",
@@ -159,7 +160,7 @@ def register(subparsers):
     )
     p.add_argument(
         "--box",
-        type=POSITIVE,
+        type=HALF_WIDTH,
         nargs=3,
         default=[0.05, 0.2, 0.5],
         help="half widths of the 3-D box (q1, dq1, dq2)",
@@ -262,6 +263,14 @@ def run_contraction(args):
         "measured_steps_10x": c.measured_steps_10x,
         "measured_steps_100x": c.measured_steps_100x,
     }
+    rho = float(c.spectral_radius)
+    out["gait_stable"] = rho < 1.0
+    if rho >= 1.0:
+        out["gait_stable_reason"] = (
+            f"the gait is unstable (spectral radius {rho:.4g} of its Poincare map): "
+            "perturbations grow, and the measured rate is not a contraction"
+        )
+        warn(args, out["gait_stable_reason"])
     for k, f in (("10x", 10), ("100x", 100)):
         if not math.isfinite(float(out[f"measured_steps_{k}"])):
             out[f"measured_steps_{k}_reason"] = (

@@ -4,8 +4,8 @@ import math
 import os
 
 from ._common import (
-    FINITE,
     KNEED_SEED,
+    STATE,
     CLIError,
     add_model_choice,
     add_model_flags,
@@ -35,7 +35,7 @@ def register(subparsers):
     add_model_choice(p)
     p.add_argument(
         "--x0",
-        type=FINITE,
+        type=STATE,
         nargs="+",
         metavar="X",
         default=None,

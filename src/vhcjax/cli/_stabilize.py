@@ -1,6 +1,7 @@
 """`vhcjax stabilize`: hold a (possibly unstable) gait by transverse-linearization feedback."""
 
 import math
+import sys
 
 from ._common import (
     KNEED_SEED,
@@ -97,6 +98,11 @@ _COORDINATES = {
 _TORQUES = {"compass": ("hip",), "kneed": ("hip", "knee")}
 
 
+#: Range of every LQR weight: the Riccati equation is solved in double precision, and
+#: weights further apart than this make it overflow or lose every digit.
+_WEIGHT_RANGE = (1e-8, 1e8)
+
+
 def _numbers(flag, text, n, names):
     try:
         values = [float(v) for v in text.split(",")]
@@ -112,13 +118,18 @@ def _weights(args):
     coords, torques = _COORDINATES[args.model], _TORQUES[args.model]
     text = args.q if args.q is not None else ",".join("1" * len(coords))
     q = _numbers("--q", text, len(coords), coords)
+    lo, hi = _WEIGHT_RANGE
     if min(q) < 0 or max(q) == 0:
         raise CLIError(f"--q must be >= 0 and not all zero, got {text!r}")
+    if max(q) > hi or min(v for v in q if v > 0) < lo:
+        raise CLIError(f"--q: each nonzero weight must be in [{lo:g}, {hi:g}], got {text!r}")
     text = args.r if args.r is not None else "1"
     n = 1 if "," not in text else len(torques)
     r = _numbers("--r", text, n, torques)
     if min(r) <= 0:
         raise CLIError(f"--r must be positive, got {text!r}")
+    if max(r) > hi or min(r) < lo:
+        raise CLIError(f"--r: each weight must be in [{lo:g}, {hi:g}], got {text!r}")
     return q, r * (len(torques) // n)
 
 
@@ -243,7 +254,22 @@ def run_stabilize(args):
     stable = bool(np.max(np.abs(np.asarray(st.closed_loop_multipliers))) < 1) and ok
     out["stable"] = stable
     if not ok:
-        out["reason"] = f"stabilization failed: {out['result']}"
+        # nothing closed-loop was computed: no numbers that look like results
+        out["reason"] = f"stabilization failed: {out['result']}: {RESULTS[st.result]}"
+        failed = (
+            "closed_loop_multipliers",
+            "closed_loop_multipliers_transverse",
+            "riccati_agreement",
+            "max_gain",
+        )
+        for key in failed:
+            out[key] = None
+        out["null_fields"] = {key: out["reason"] for key in failed}
+        if args.json:
+            print_json(_finite_or_none(out))
+        else:
+            print(f"vhcjax stabilize: {out['reason']}", file=sys.stderr)
+        return 1
 
     x0 = model.section_to_state(z + args.perturbation)
     sim = control.simulate_closed_loop(model, x0, st.feedback, args.steps)

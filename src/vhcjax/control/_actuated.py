@@ -21,6 +21,8 @@ from .._results import RESULTS
 from ..hybrid import (
     DEFAULT_CONFIG,
     StepResult,
+    check_num_steps,
+    check_state_shape,
     dense_cycle,
     flow,
     multidomain_step,
@@ -104,6 +106,7 @@ def closed_loop_step(model, x0, feedback, config=DEFAULT_CONFIG, alive=True):
     result codes. Differentiable in forward mode through the events.
     """
     x0 = jnp.asarray(x0, float)
+    check_state_shape(model, x0)
     if is_multidomain(model):
         return multidomain_step(model, x0, config, alive, None, _fields(model, feedback))[0]
     return step_unchecked(model, x0, config, alive, None, closed_loop_field(model, feedback))
@@ -194,6 +197,8 @@ def simulate_closed_loop(
     **Returns:** a `ClosedLoopSimulation`.
     """
     x0 = jnp.asarray(x0, float)
+    check_state_shape(model, x0)
+    check_num_steps(num_steps)
 
     def body(carry, _):
         x, alive, first_fail = carry

@@ -21,7 +21,7 @@ import jax.numpy as jnp
 
 from .._programs import stored_jit
 from .._results import RESULTS
-from ..hybrid import DEFAULT_CONFIG, SolverConfig, flow
+from ..hybrid import DEFAULT_CONFIG, SolverConfig, check_section_shape, flow
 from ..robustness import direction, finish_step, impulse_velocity_jump, swing_from
 from ._actuated import (
     closed_loop_field,
@@ -171,6 +171,7 @@ def stabilize(
     inspect `result`.
     """
     z = jnp.asarray(z, float)
+    check_section_shape(model, z)
     system = transverse_system(model, model.section_to_state(z), num_points=num_points)
     ric = riccati_backward(model, system, Q, R, Q_jump)
     ric2 = riccati_hamiltonian(model, system, Q, R, Q_jump)

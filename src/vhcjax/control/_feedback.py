@@ -11,6 +11,7 @@ so the torque is zero: the controller holds the passive gait without changing it
 
 import equinox as eqx
 import jax
+import jax.core
 import jax.numpy as jnp
 
 
@@ -108,6 +109,10 @@ class HybridTransverseFeedback(eqx.Module):
 def transverse_feedback(system, riccati, torque_limit: float | jax.Array = jnp.inf):
     """The `TransverseFeedback` of a `TransverseSystem` and its `RiccatiSolution` (a
     `HybridTransverseFeedback` for a `HybridTransverseSystem`)."""
+    if not isinstance(torque_limit, jax.core.Tracer) and not bool(
+        jnp.all(jnp.asarray(torque_limit) > 0)
+    ):
+        raise ValueError(f"torque_limit must be positive (N m; inf for none), got {torque_limit}")
     limit = jnp.asarray(torque_limit, float)
     if hasattr(system, "domains"):
         return HybridTransverseFeedback(

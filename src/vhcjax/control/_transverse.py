@@ -29,7 +29,7 @@ import numpy as np
 
 from .._programs import stored_jit
 from .._results import RESULTS
-from ..hybrid import SolverConfig, multidomain_step
+from ..hybrid import SolverConfig, check_state_shape, multidomain_step
 from ..stability import guard_normal
 from ._actuated import actuated_vector_field, is_multidomain, num_inputs
 
@@ -250,6 +250,9 @@ def transverse_system(model, x_plus, *, num_points=401):
     model).
     """
     x_plus = jnp.asarray(x_plus, float)
+    check_state_shape(model, x_plus, "x_plus")
+    if isinstance(num_points, bool) or not isinstance(num_points, int) or num_points < 2:
+        raise ValueError(f"num_points must be an integer >= 2, got {num_points!r}")
     if is_multidomain(model):
         return _hybrid_transverse_system(model, x_plus, num_points)
     n = model.n_dof

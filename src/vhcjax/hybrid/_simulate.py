@@ -14,6 +14,7 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+import numpy as np
 import optimistix as optx
 
 from .._batching import host_workers, padded_map
@@ -307,20 +308,39 @@ class Simulation(eqx.Module):
         return jnp.cumsum(self.steps.period, axis=-1)
 
 
-def _check_state_shape(model, x0):
-    """A one-line error naming the expected shape (at trace time: shapes are static)."""
+def check_state_shape(model, x0, name="x0"):
+    """A one-line `ValueError` naming the expected shape of one state of `model` (at
+    trace time: shapes are static)."""
     n = model.n_dof
     if jnp.shape(x0) != (2 * n,):
         raise ValueError(
-            f"x0 must be one state [q, dq] of shape ({2 * n},) for "
+            f"{name} must be one state [q, dq] of shape ({2 * n},) for "
             f"{type(model).__name__} ({n} joint angles and their rates), got "
-            f"shape {jnp.shape(x0)}; for a batch use `simulate_batch` or vmap"
+            f"shape {jnp.shape(x0)}; for a batch use vmap"
         )
+
+
+def check_section_shape(model, z, name="z"):
+    """A one-line `ValueError` naming the expected shape of one section point of
+    `model` (`model.state_to_section` of a post-impact state)."""
+    k = 2 * model.n_dof - 1
+    if jnp.shape(z) != (k,):
+        raise ValueError(
+            f"{name} must be one section point of shape ({k},) for {type(model).__name__} "
+            f"(model.state_to_section of a post-impact state), got shape {jnp.shape(z)}"
+        )
+
+
+def check_num_steps(num_steps):
+    """A one-line `ValueError` unless `num_steps` is a nonnegative integer."""
+    if isinstance(num_steps, bool) or not isinstance(num_steps, (int, np.integer)) or num_steps < 0:
+        raise ValueError(f"num_steps must be a nonnegative integer, got {num_steps!r}")
 
 
 def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
     x0 = jnp.asarray(x0, dtype=float)
-    _check_state_shape(model, x0)
+    check_state_shape(model, x0)
+    check_num_steps(num_steps)
     # An invalid model (negative mass, NaN gravity, negative slope, ...) takes no step:
     # every step carries `bad_input`, whatever the dynamics would have done with it.
     valid = model.validate() if hasattr(model, "validate") else jnp.asarray(True)

@@ -122,8 +122,23 @@ def atlas(
     mu = np.atleast_1d(np.asarray(mass_ratio, float))
     beta = np.atleast_1d(np.asarray(length_ratio, float))
     for name, v in (("mass_ratio", mu), ("length_ratio", beta)):
-        if v.ndim != 1 or not (np.isfinite(v).all() and (v > 0).all()):
-            raise ValueError(f"atlas: {name} must be a 1-d array of finite positive numbers")
+        if v.ndim != 1 or v.size == 0 or not (np.isfinite(v).all() and (v > 0).all()):
+            raise ValueError(
+                f"atlas: {name} must be a non-empty 1-d array of finite positive numbers"
+            )
+    for name, v in (
+        ("mass_leg", mass_leg),
+        ("leg_length", leg_length),
+        ("gravity", gravity),
+        ("psi_start", psi_start),
+        ("step", step),
+    ):
+        if not (math.isfinite(v) and v > 0):
+            raise ValueError(f"atlas: {name} must be finite and positive, got {v!r}")
+    if not (math.isfinite(psi_max) and psi_max > psi_start):
+        raise ValueError(f"atlas: psi_max must be finite and above psi_start, got {psi_max!r}")
+    if slope is not None and not (math.isfinite(slope) and slope > 0):
+        raise ValueError(f"atlas: slope must be finite and positive (rad), got {slope!r}")
     MU, BETA = np.meshgrid(mu, beta, indexing="ij")
     model = grid_model(
         MU.ravel(),

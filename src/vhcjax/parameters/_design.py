@@ -87,7 +87,9 @@ class DesignResult(eqx.Module):
       `design`) or `"no_gait"` (no gait found along the step).
     - `initial`, `optimum`: dicts with `params` (all five parameters), `value`,
       `gradient` (per varied parameter, of the objective in its own units), and for the
-      optimum `x0` (post-impact state) and `multipliers` (complex).
+      optimum `x0` (post-impact state), `multipliers` (complex), `spectral_radius` and
+      `stable` (whether the optimal gait is stable: a speed design may leave the stable
+      walkers).
     - `projected_gradient`: max-norm of the projected gradient at the optimum, in the
       scaled coordinates $u \\in [0, 1]$.
     - `history`: one dict per iterate: `iteration`, `params`, `value`.
@@ -168,6 +170,12 @@ def design(
 
     if objective not in OBJECTIVES:
         raise ValueError(f"objective must be one of {OBJECTIVES}, got {objective!r}")
+    if isinstance(steps, bool) or not isinstance(steps, int) or steps < 1:
+        raise ValueError(f"steps must be a positive integer, got {steps!r}")
+    if not (math.isfinite(learning_rate) and learning_rate > 0):
+        raise ValueError(f"learning_rate must be finite and positive, got {learning_rate!r}")
+    if model is not None and not isinstance(model, CompassGait):
+        raise ValueError(f"design works on a CompassGait, got {type(model).__name__}")
     vary = tuple(vary)
     if not vary or any(v not in PARAMETERS for v in vary) or len(set(vary)) != len(vary):
         raise ValueError(f"vary must be distinct names from {tuple(PARAMETERS)}, got {vary}")
@@ -255,6 +263,8 @@ def design(
         "gradient": dict(zip(vary, map(float, grad))),
         "x0": [float(t) for t in np.asarray(gait.x_plus)],
         "multipliers": [complex(t) for t in np.asarray(spec.multipliers)],
+        "spectral_radius": float(spec.spectral_radius),
+        "stable": bool(spec.spectral_radius < 1.0),
     }
     return DesignResult(
         objective, vary, bounds, result, k, initial, optimum, float(np.abs(pg).max()), history, best

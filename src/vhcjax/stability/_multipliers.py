@@ -33,6 +33,7 @@ from .._results import RESULTS
 from ..hybrid import (
     DEFAULT_CONFIG,
     FAST_CONFIG,
+    check_section_shape,
     flow,
     ode_solver,
     simulate,
@@ -562,6 +563,10 @@ def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG, *, iterations=20, h=1e-6
     (`not_converged`), or at a failed step (its code; `residual` is then `inf`: the
     failed map holds its state, which is no convergence).
     """
+    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
+        raise ValueError(f"k must be a positive integer (steps per period), got {k!r}")
+    k = int(k)
+    check_section_shape(model, jnp.asarray(z0), "z0")
 
     def Pk(z, jac):
         J, orbit, periods, code = np.eye(len(z)), [], [], RESULTS.successful
