@@ -46,6 +46,23 @@ def stabilized(gaits):
     return {name: vj.stabilize(m, z) for name, (m, z) in gaits.items()}
 
 
+def test_stabilize_needs_a_gait_and_a_valid_model(gaits, stabilized):
+    """A point that is not on a gait is `not_a_gait` (its orbit does not close), an
+    invalid model `bad_input`; the real gait `successful` (closure ~1e-13)."""
+    m, z = gaits["unstable-3"]
+    assert stabilized["unstable-3"].result == vj.RESULTS.successful
+    assert float(stabilized["unstable-3"].system.closure) < 1e-9
+    assert vj.stabilize(m, z + 0.05).result == vj.RESULTS.not_a_gait
+    bad = vj.CompassGait(mH=-10.0, psi=math.radians(3.0))
+    assert vj.stabilize(bad, z).result == vj.RESULTS.bad_input
+    with pytest.raises(ValueError, match="nonnegative definite"):
+        vj.stabilize(m, z, Q=jnp.array([-1.0, 1.0, 1.0]))
+    with pytest.raises(ValueError, match="positive definite"):
+        vj.stabilize(m, z, R=jnp.array([0.0]))
+    with pytest.raises(ValueError, match=r"\(3, 3\) matrix"):
+        vj.stabilize(m, z, Q=jnp.ones(2))
+
+
 def test_input_enters_the_equations_of_motion(model):
     q = jnp.array([0.2, -0.3])
     dq = jnp.array([-1.1, 0.4])

@@ -239,7 +239,7 @@ def test_cli_gait_and_multipliers(capsys, kw, gait):
 
     m = _json(
         capsys,
-        ["multipliers", "--model", "kneed", "--method", "shooting"]
+        ["multipliers", "--model", "kneed"]  # shooting: the kneed walker's default
         + ["--slope-deg", SLOPE_DEG, "--json"],
     )
     assert m["model"] == "kneed" and m["stable"] is True
@@ -249,8 +249,8 @@ def test_cli_gait_and_multipliers(capsys, kw, gait):
     np.testing.assert_allclose(m["max_abs_multiplier"], ev[-1], atol=1e-10)
 
     for argv in (
-        ["gait", "--model", "kneed", "--slope-deg", "3"],
-        ["multipliers", "--model", "kneed"],
+        ["gait", "--model", "kneed", "--method", "vhc", "--slope-deg", "3"],
+        ["multipliers", "--model", "kneed", "--method", "vhc"],
         ["gait", "--model", "kneed", "--method", "shooting", "--a", "0.4"],
         ["basin", "--mass-shank", "0.1"],
         ["gait", "--model", "kneed", "--method", "shooting", "--family", "stable"],

@@ -37,7 +37,7 @@ def register(subparsers):
         "--slope-deg",
         required=True,
         metavar="START:STOP:STEP",
-        help="slopes in degrees, e.g. 0.5:5.5:0.01",
+        help="slopes in degrees, e.g. 0.5:5.5:0.01 (inclusive) or one slope",
     )
     p.add_argument(
         "--transient",
@@ -81,10 +81,10 @@ def register(subparsers):
     q.add_argument(
         "--method",
         choices=["vhc", "shooting"],
-        default="vhc",
-        help="gait search: vhc = thesis Problem 1, shooting = Problem 2 (default "
-        "%(default)s; the VHC search needs q1 monotone along the step; the kneed walker: "
-        "shooting from its gait at 0.0504 rad, Poincare multipliers only)",
+        default=None,
+        help="gait search: vhc = thesis Problem 1, shooting = Problem 2 (default vhc; "
+        "the VHC search needs q1 monotone along the step; the kneed walker: shooting, "
+        "the default there, from its gait at 0.0504 rad, Poincare multipliers only)",
     )
     q.add_argument("--png", metavar="FILE", help="save the complex-plane plot")
     q.add_argument("--json", action="store_true", help="print a JSON object")

@@ -27,13 +27,16 @@ class ArgumentError(Exception):
 class Parser(argparse.ArgumentParser):
     """`argparse.ArgumentParser` whose errors are one line (raised as `ArgumentError`, so
     that in-process callers of `main` get exit status 2 and no `SystemExit`), and which
-    reads a negative number in scientific notation (`-1e6`), `-inf` and `-nan` as a value,
-    not as an option (argparse alone only knows `-12` and `-1.5`)."""
+    reads a negative number in scientific notation (`-1e6`), `-inf`, `-nan` and a
+    comma-separated list starting with a negative number (`-1,1,1`) as a value, not as
+    an option (argparse alone only knows `-12` and `-1.5`)."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
+        number = r"(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|inf|infinity|nan)"
+        # a negative number, or a comma-separated list starting with one (--q -1,1,1)
         self._negative_number_matcher = re.compile(
-            r"^-(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|inf|infinity|nan)$", re.IGNORECASE
+            rf"^-{number}(?:,[-+]?{number})*$", re.IGNORECASE
         )
 
     def error(self, message):
@@ -300,11 +303,15 @@ def describe(args, slope_deg=None):
 
 
 def parse_range(text, name="--slope-deg"):
-    """`START:STOP:STEP` (STOP included when on the grid, never passed) -> list of floats."""
+    """`START:STOP:STEP` (STOP included when on the grid, never passed), or one number,
+    -> list of floats."""
     try:
         parts = [float(p) for p in text.split(":")]
     except ValueError:
-        raise CLIError(f"{name} must be START:STOP:STEP, got {text!r}") from None
+        raise CLIError(f"{name} must be START:STOP:STEP or one number, got {text!r}") from None
+    if len(parts) == 1:
+        check_finite(name, parts[0])
+        return parts
     if len(parts) != 3:
         raise CLIError(f"{name} must be START:STOP:STEP, got {text!r}")
     start, stop, step = parts

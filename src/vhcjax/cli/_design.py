@@ -151,6 +151,8 @@ def parse_vary(text):
     return names
 
 
+#: Most slopes an atlas scan visits (they are solved in sequence).
+MAX_SCAN_SLOPES = 2_000
 #: Largest HI/LO of a design bound.
 MAX_BOUND_RATIO = 1e3
 
@@ -350,6 +352,12 @@ def run_atlas(args):
             raise CLIError(f"{flag} must be below 30 degrees, got {v}")
     if args.scan_max_deg <= args.scan_start_deg:
         raise CLIError("--scan-max-deg must be above --scan-start-deg")
+    scan = (args.scan_max_deg - args.scan_start_deg) / args.scan_step_deg
+    if scan > MAX_SCAN_SLOPES:
+        raise CLIError(
+            f"--scan-step-deg {args.scan_step_deg:g} scans {scan:.3g} slopes one after "
+            f"another; at most {MAX_SCAN_SLOPES}"
+        )
     if args.slope_deg is not None and args.slope_deg < args.scan_start_deg:
         raise CLIError("--slope-deg must not be below --scan-start-deg")
     at = atlas(

@@ -93,7 +93,7 @@ def register(subparsers):
         "--slope-deg",
         required=True,
         metavar="START:STOP:STEP",
-        help="slopes in degrees, e.g. 0.5:6:0.1 (inclusive), each in (0, 30)",
+        help="slopes in degrees, e.g. 0.5:6:0.1 (inclusive) or one slope, each in (0, 30)",
     )
     _family_method(s, both=True)
     s.add_argument(
@@ -126,7 +126,7 @@ def _family_method(p, both):
     )
     p.add_argument(
         "--method",
-        default="vhc",
+        default=None,
         choices=("vhc", "shooting"),
         help="vhc = thesis Problem 1, shooting = Problem 2 (default %(default)s)",
     )

@@ -474,6 +474,10 @@ def run_slope(args):
         )
 
 
+#: Most largest-push searches (phases x directions) of one `push` command.
+MAX_PUSHES = 10_000
+
+
 def run_push(args):
     import jax.numpy as jnp
     import numpy as np
@@ -486,6 +490,12 @@ def run_push(args):
     )
 
     check_output_file(args.png, "--png")
+    pushes = args.phases * len(args.directions_deg)
+    if pushes > MAX_PUSHES:
+        raise CLIError(
+            f"--phases {args.phases} x {len(args.directions_deg)} --directions-deg gives "
+            f"{pushes:,} largest-push searches (bisections); at most {MAX_PUSHES:,}"
+        )
     model, z, x_star, period, zn = _gait(args)
     phases = np.arange(args.phases) / args.phases
     angles = np.radians(np.asarray(args.directions_deg, float))

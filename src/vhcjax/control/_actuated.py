@@ -108,8 +108,12 @@ def closed_loop_step(model, x0, feedback, config=DEFAULT_CONFIG, alive=True):
     x0 = jnp.asarray(x0, float)
     check_state_shape(model, x0)
     if is_multidomain(model):
-        return multidomain_step(model, x0, config, alive, None, _fields(model, feedback))[0]
-    return step_unchecked(model, x0, config, alive, None, closed_loop_field(model, feedback))
+        sr = multidomain_step(model, x0, config, alive, None, _fields(model, feedback))[0]
+    else:
+        sr = step_unchecked(model, x0, config, alive, None, closed_loop_field(model, feedback))
+    # an invalid model (negative mass, NaN slope, ...): bad_input, whatever the step did
+    code = RESULTS.where(model.validate(), sr.result, RESULTS.bad_input)
+    return eqx.tree_at(lambda r: r.result, sr, code)
 
 
 def step_torque(model, x0, period, feedback, num_points=64, config=DEFAULT_CONFIG):
@@ -207,6 +211,9 @@ def simulate_closed_loop(
         else:
             sr = closed_loop_step(model, x, feedback, config, alive)
             umax = urms = jnp.zeros((), x.dtype)
+        # an invalid model takes no step (the torque statistics' step is not checked)
+        bad = RESULTS.where(model.validate(), sr.result, RESULTS.bad_input)
+        sr = eqx.tree_at(lambda r: r.result, sr, bad)
         ok = alive & (sr.result == RESULTS.successful)
         new_fail = RESULTS.where(alive & ~ok, sr.result, first_fail)
         result = RESULTS.where(alive, sr.result, first_fail)

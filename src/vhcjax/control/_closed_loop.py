@@ -32,7 +32,13 @@ from ._actuated import (
     simulate_closed_loop,
 )
 from ._feedback import HybridTransverseFeedback, TransverseFeedback, transverse_feedback
-from ._riccati import RiccatiSolution, _pieces, riccati_backward, riccati_hamiltonian
+from ._riccati import (
+    RiccatiSolution,
+    _pieces,
+    riccati_backward,
+    riccati_hamiltonian,
+    weight_matrix,
+)
 from ._transverse import (
     HybridTransverseSystem,
     TransverseSystem,
@@ -367,13 +373,8 @@ _stabilize_jit = stored_jit(stabilize)
 
 def _as_weights(model, Q, R, Q_jump):
     r, m = 2 * model.n_dof - 1, num_inputs(model)
-
-    def mat(W, k):
-        W = jnp.eye(k) if W is None else jnp.asarray(W, float)
-        return jnp.diag(W) if W.ndim == 1 else W.reshape(k, k)
-
-    Q = mat(Q, r)
-    return Q, mat(R, m), Q if Q_jump is None else mat(Q_jump, r)
+    Q = weight_matrix("Q", Q, r, jnp.eye(r))
+    return Q, weight_matrix("R", R, m, jnp.eye(m)), weight_matrix("Q_jump", Q_jump, r, Q)
 
 
 def _stabilize(

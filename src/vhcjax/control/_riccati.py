@@ -30,7 +30,9 @@ cycle and takes the monodromy at the start of the domain with the fewest coordin
 import diffrax
 import equinox as eqx
 import jax
+import jax.core
 import jax.numpy as jnp
+import numpy as np
 
 from .._results import RESULTS
 from ._actuated import num_inputs
@@ -72,14 +74,35 @@ class RiccatiSolution(eqx.Module):
     result: RESULTS
 
 
+def weight_matrix(name, W, k, default):
+    """`W` as a `(k, k)` matrix (given as one, as its diagonal, or as a scalar when
+    `k = 1`); a one-line `ValueError` for another shape, and, for concrete values, for a
+    weight that is not finite, not symmetric, or negative (`name` "R": not positive)."""
+    W = default if W is None else jnp.asarray(W, float)
+    if W.ndim == 0 and k == 1:
+        W = W.reshape(1, 1)
+    elif W.ndim == 1 and W.shape == (k,):
+        W = jnp.diag(W)
+    if W.shape != (k, k):
+        raise ValueError(
+            f"{name} must be a ({k}, {k}) matrix or its diagonal of shape ({k},), got shape "
+            f"{W.shape}"
+        )
+    if not isinstance(W, jax.core.Tracer):
+        w = np.asarray(W)
+        low = np.linalg.eigvalsh(0.5 * (w + w.T)).min() if np.isfinite(w).all() else np.nan
+        if not (np.isfinite(w).all() and np.allclose(w, w.T) and low >= 0):
+            raise ValueError(f"{name} must be finite, symmetric and nonnegative definite")
+        if name == "R" and low <= 0:
+            raise ValueError("R must be positive definite (every input costs something)")
+    return W
+
+
 def _weights(system, Q, R, Q_jump):
     r, m = system.B.shape[-2], system.B.shape[-1]
-    Q = jnp.eye(r) if Q is None else jnp.asarray(Q, float)
-    R = jnp.eye(m) if R is None else jnp.asarray(R, float)
-    Q = jnp.diag(Q) if Q.ndim == 1 else Q
-    R = jnp.diag(R) if R.ndim == 1 else R.reshape(m, m)
-    Q_jump = Q if Q_jump is None else jnp.asarray(Q_jump, float)
-    Q_jump = jnp.diag(Q_jump) if Q_jump.ndim == 1 else Q_jump
+    Q = weight_matrix("Q", Q, r, jnp.eye(r))
+    R = weight_matrix("R", R, m, jnp.eye(m))
+    Q_jump = weight_matrix("Q_jump", Q_jump, r, Q)
     return Q, R, Q_jump
 
 

@@ -30,7 +30,7 @@ import numpy as np
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import SolverConfig, check_state_shape, multidomain_step
-from ..stability import guard_normal
+from ..stability import GAIT_TOL, guard_normal
 from ._actuated import actuated_vector_field, is_multidomain, num_inputs
 
 
@@ -254,12 +254,20 @@ def transverse_system(model, x_plus, *, num_points=401):
     if isinstance(num_points, bool) or not isinstance(num_points, int) or num_points < 2:
         raise ValueError(f"num_points must be an integer >= 2, got {num_points!r}")
     if is_multidomain(model):
-        return _hybrid_transverse_system(model, x_plus, num_points)
-    n = model.n_dof
-    # The impact leaves the configuration unchanged and relabelling is an involution on
-    # configurations, so the pre-impact configuration is the relabelled post-impact one.
-    q_minus = model.relabel(x_plus[:n], jnp.zeros(n, x_plus.dtype))[0]
-    return _tabulate(model, x_plus, q_minus[0], num_points, None, x_plus)
+        system = _hybrid_transverse_system(model, x_plus, num_points)
+    else:
+        n = model.n_dof
+        # The impact leaves the configuration unchanged and relabelling is an involution
+        # on configurations, so the pre-impact configuration is the relabelled post-impact
+        # one.
+        q_minus = model.relabel(x_plus[:n], jnp.zeros(n, x_plus.dtype))[0]
+        system = _tabulate(model, x_plus, q_minus[0], num_points, None, x_plus)
+    # an invalid model, or a state whose orbit does not come back to it: no gait
+    code = system.result
+    off = system.closure > GAIT_TOL * jnp.maximum(1.0, jnp.max(jnp.abs(x_plus)))
+    code = RESULTS.where((code == RESULTS.successful) & off, RESULTS.not_a_gait, code)
+    code = RESULTS.where(model.validate(), code, RESULTS.bad_input)
+    return eqx.tree_at(lambda t: t.result, system, code)
 
 
 class HybridTransverseSystem(eqx.Module):

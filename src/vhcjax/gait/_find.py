@@ -40,6 +40,13 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
     **Returns:** a `Gait`.
     """
     _check(family, method)
+    _check_model(model)
+    if throw and not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(model)):
+        if not bool(_valid(model)):  # one line now, not a runtime error later
+            raise ValueError(
+                "the model has a non-positive or non-finite parameter (masses, lengths, "
+                "gravity, slope); with throw=False the gait is coded bad_input"
+            )
     params, model = model, detach(model)  # the search itself is never differentiated
     if guess is None:
         gait = continue_to_model(model, family, method)
@@ -74,6 +81,22 @@ _MIN_SPLIT = 8
 
 
 _search_one_jit = stored_jit(_search)
+
+
+#: `model.validate()` as one small program (not a dozen eager operations).
+_valid = eqx.filter_jit(lambda model: model.validate())
+
+
+def _check_model(model):
+    """A one-line `ValueError` for a model the gait searches do not cover."""
+    from ..models import CompassGait
+
+    if not isinstance(model, CompassGait):
+        raise ValueError(
+            f"find_gait and find_gaits search gaits of a CompassGait, got "
+            f"{type(model).__name__}; for another model use vhcjax.fixed_point (shooting on "
+            "its step map)"
+        )
 
 
 def _check_guess_shape(shape, batch, name):

@@ -323,7 +323,8 @@ def check_state_shape(model, x0, name="x0"):
 def check_section_shape(model, z, name="z"):
     """A one-line `ValueError` naming the expected shape of one section point of
     `model` (`model.state_to_section` of a post-impact state)."""
-    k = 2 * model.n_dof - 1
+    x = jax.ShapeDtypeStruct((2 * model.n_dof,), jnp.float64)
+    k = jax.eval_shape(model.state_to_section, x).shape[0]  # 2n - 1 for a compass gait
     if jnp.shape(z) != (k,):
         raise ValueError(
             f"{name} must be one section point of shape ({k},) for {type(model).__name__} "

@@ -211,6 +211,8 @@ def atlas_json(at):
                 cell["reason"] = at.reason[k]
             if at.slope is not None and not np.isfinite(r):
                 cell["spectral_radius_reason"] = "no period-1 gait found at the slope"
+            if at.slope is None:
+                cell["spectral_radius_reason"] = "no slope given (--slope-deg)"
             cells.append(cell)
     return {
         "mass_ratio": [float(m) for m in at.mass_ratio],

@@ -180,11 +180,16 @@ def design(
     if not vary or any(v not in PARAMETERS for v in vary) or len(set(vary)) != len(vary):
         raise ValueError(f"vary must be distinct names from {tuple(PARAMETERS)}, got {vary}")
     base = CompassGait() if model is None else model
+    extra = sorted(set(bounds or {}) - set(vary))
+    if extra:
+        raise ValueError(f"bounds given for parameters that are not varied: {extra}")
     bounds = {k: tuple(map(float, (bounds or {}).get(k, DEFAULT_BOUNDS[k]))) for k in vary}
     lo = np.array([bounds[k][0] for k in vary])
     hi = np.array([bounds[k][1] for k in vary])
-    if not (lo < hi).all():
-        raise ValueError(f"every bound needs lo < hi, got {bounds}")
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all() and (0 < lo).all() and (lo < hi).all()):
+        raise ValueError(
+            f"every bound needs finite 0 < lo < hi (physical parameters), got {bounds}"
+        )
     sense = _SENSE[objective]
     if not bool(base.validate()):
         raise ValueError("design: the starting model has a non-positive or non-finite parameter")

@@ -4,6 +4,7 @@ Jacobian, period doubling, period-k orbits, bifurcation diagrams.
 
 from ._multipliers import (
     AGREEMENT_RTOL as AGREEMENT_RTOL,
+    GAIT_TOL as GAIT_TOL,
     MAX_CONDITION as MAX_CONDITION,
     SEEDS_3DEG as SEEDS_3DEG,
     BifurcationDiagram as BifurcationDiagram,

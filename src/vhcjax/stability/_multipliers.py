@@ -567,6 +567,11 @@ def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG, *, iterations=20, h=1e-6
         raise ValueError(f"k must be a positive integer (steps per period), got {k!r}")
     k = int(k)
     check_section_shape(model, jnp.asarray(z0), "z0")
+    if not bool(model.validate()):  # an invalid model takes no step: nothing computed
+        z = np.asarray(z0, float)
+        none = np.zeros(len(z), complex)
+        orbit = np.tile(z, (k, 1))
+        return PeriodKOrbit(z, orbit, np.zeros(k), none, none, np.inf, RESULTS.bad_input, k)
 
     def Pk(z, jac):
         J, orbit, periods, code = np.eye(len(z)), [], [], RESULTS.successful
