@@ -75,7 +75,7 @@ if FULL:
 # ## Both families against slope
 # A vector of slopes solved in one batched call (same compiled function as above when
 # the batch has the same size); failed members are re-seeded from their solved
-# neighbours (the library's `vhcjax.sweep` does a proper continuation with a tangent
+# neighbours (the library's `vhcjax.sweep` does a proper continuation with a secant
 # predictor, at the cost of one more compile).
 
 # %%

@@ -18,8 +18,8 @@
 #
 # Here: the most robust walker at 3 degrees (smallest spectral radius of the step map,
 # the fastest return to the gait) over the hip mass and the position of the leg's centre
-# of mass, within bounds, checked against a batched grid; then a small atlas of the flip slope over mass and length
-# ratios. `VHCJAX_FULL=1` for full sizes.
+# of mass, within bounds, checked against a batched grid; then a small atlas of the flip
+# slope over mass and length ratios. `VHCJAX_FULL=1` for full sizes.
 
 # %%
 import math
@@ -118,7 +118,7 @@ ax2.plot(
     [h["params"]["mass-hip"] for h in res.history],
     [h["params"]["b"] for h in res.history],
     "o-",
-    color="w",
+    color="tab:orange",
     label="design iterates",
 )
 ax2.plot(H[i, j], Bb[i, j], "r*", markersize=12, label="grid minimum")

@@ -98,7 +98,9 @@ def test_bad_numeric_value_one_line_exit_2(capsys, cmd, flag, nargs, value):
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith(f"vhcjax {cmd}: error:"), err
     assert flag in lines[0] and "Traceback" not in err
-    assert time.perf_counter() - t0 < 5.0  # refused before any compilation
+    # refused before any work: well under a command's compile time (generous for a loaded
+    # machine; the refusal itself takes milliseconds)
+    assert time.perf_counter() - t0 < 15.0
 
 
 @pytest.mark.parametrize(
@@ -201,7 +203,7 @@ def test_unwritable_outputs_refused_before_work(tmp_path, capsys):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err.strip()
         assert "\n" not in err and argv[-2] in err, (argv, err)
-        assert time.perf_counter() - t0 < 5.0, argv
+        assert time.perf_counter() - t0 < 15.0, argv  # before any work (see above)
     assert set(os.listdir(tmp_path)) == before | {"file"}  # nothing left behind
 
 

@@ -47,12 +47,12 @@ def stabilized(gaits):
 
 
 def test_stabilize_needs_a_gait_and_a_valid_model(gaits, stabilized):
-    """A point that is not on a gait is `not_a_gait` (its orbit does not close), an
+    """A point that is not on a gait is `orbit_not_closed` (its orbit does not close), an
     invalid model `bad_input`; the real gait `successful` (closure ~1e-13)."""
     m, z = gaits["unstable-3"]
     assert stabilized["unstable-3"].result == vj.RESULTS.successful
     assert float(stabilized["unstable-3"].system.closure) < 1e-9
-    assert vj.stabilize(m, z + 0.05).result == vj.RESULTS.not_a_gait
+    assert vj.stabilize(m, z + 0.05).result == vj.RESULTS.orbit_not_closed
     bad = vj.CompassGait(mH=-10.0, psi=math.radians(3.0))
     assert vj.stabilize(bad, z).result == vj.RESULTS.bad_input
     with pytest.raises(ValueError, match="nonnegative definite"):

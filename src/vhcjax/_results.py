@@ -56,6 +56,11 @@ class RESULTS(eqx.Enumeration):
         "exhausts max_steps or loses its symplectic structure); the backward Riccati "
         "iteration decides."
     )
+    orbit_not_closed = (
+        "The tabulated orbit does not come back to its start (by more than 1e-6 relative "
+        "to max(1, |x|)): the state is not on a period-1 gait, or the phase grid "
+        "(num_points) is too coarse for the orbit."
+    )
     not_a_gait = (
         "The state is not a period-1 gait: one step moves it on the section by more than "
         "1e-6 relative to max(1, |z|), so its Jacobian's eigenvalues are not Floquet "

@@ -105,7 +105,9 @@ def run_multipliers(args):
 
     kneed = args.model == "kneed"
     if kneed and args.method != "shooting":
-        raise CLIError("the kneed walker's gaits are found by shooting: use --method shooting")
+        raise CLIError(
+            "the kneed walker's gaits are found by shooting (its default): drop --method vhc"
+        )
     model = walker_from_args(args)
     check_output_file(args.png, "--png")
     if kneed:  # its one gait family, from the gait at its default slope

@@ -313,7 +313,7 @@ def parse_range(text, name="--slope-deg"):
         check_finite(name, parts[0])
         return parts
     if len(parts) != 3:
-        raise CLIError(f"{name} must be START:STOP:STEP, got {text!r}")
+        raise CLIError(f"{name} must be START:STOP:STEP or one number, got {text!r}")
     start, stop, step = parts
     check_finite(name, start, stop, step)
     if step <= 0 or stop < start:

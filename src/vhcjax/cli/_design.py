@@ -321,10 +321,12 @@ _REASONS = {
     "successful": "the projected gradient vanished (relative gtol)",
     "max_iterations": "the iteration limit (--steps) was reached before the gradient vanished",
     "no_descent": (
-        "no step along the gradient improves the objective: the design stopped at a point "
-        "where the objective is not differentiable (for the spectral radius, typically "
-        "where a complex pair of multipliers meets the real axis); its gradient need not "
-        "vanish there, and a grid over the bounds is the check of optimality"
+        "no step along Adam's update or along the projected gradient (each halved 7 "
+        "times) improves the objective: the design stopped where the gradient cannot "
+        "improve it at this scale, typically where the objective is not differentiable "
+        "(for the spectral radius, where a complex pair of multipliers meets the real "
+        "axis); the gradient need not vanish there, and a grid over the bounds is the "
+        "check of optimality"
     ),
     "no_gait": "no gait was found along the step from the last iterate",
 }

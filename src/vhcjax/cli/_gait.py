@@ -85,8 +85,9 @@ def register(subparsers):
     s = subparsers.add_parser(
         "sweep",
         help="a gait family against the slope, by continuation",
-        description="Follow a gait family over a range of slopes by continuation (tangent "
-        "predictor, Newton corrector) and report where it ends and why.",
+        description="Follow a gait family over a range of slopes by continuation (secant "
+        "predictor over anchor slopes, then every slope by the batched Newton search) and "
+        "report where it ends and why.",
     )
     add_model_flags(s, slope=False)
     s.add_argument(
@@ -128,7 +129,8 @@ def _family_method(p, both):
         "--method",
         default=None,
         choices=("vhc", "shooting"),
-        help="vhc = thesis Problem 1, shooting = Problem 2 (default %(default)s)",
+        help="vhc = thesis Problem 1, shooting = Problem 2 (default vhc; shooting, the "
+        "kneed walker's only search, for --model kneed)",
     )
 
 
@@ -230,7 +232,9 @@ def _run_kneed_gait(args):
     from ..stability import gait_multipliers
 
     if args.method != "shooting":
-        raise CLIError("the kneed walker's gaits are found by shooting: use --method shooting")
+        raise CLIError(
+            "the kneed walker's gaits are found by shooting (its default): drop --method vhc"
+        )
     model = walker_from_args(args)
     guess = jnp.asarray(args.guess if args.guess is not None else KNEED_SEED)
     fp = fixed_point(model, guess)

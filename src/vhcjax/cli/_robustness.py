@@ -263,7 +263,8 @@ def run_contraction(args):
         "measured_steps_10x": c.measured_steps_10x,
         "measured_steps_100x": c.measured_steps_100x,
     }
-    rho = float(c.spectral_radius)
+    rho = float(c.spectral_radius)  # the gait's, as push and basin report it
+    out["gait_spectral_radius"] = rho
     out["gait_stable"] = rho < 1.0
     if rho >= 1.0:
         out["gait_stable_reason"] = (

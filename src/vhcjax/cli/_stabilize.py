@@ -46,7 +46,8 @@ def register(subparsers):
         "--q",
         default=None,
         metavar="Q1,Q2,...",
-        help="diagonal LQR weights per second on the transverse coordinates, >= 0, "
+        help="diagonal LQR weights per second on the transverse coordinates, 0 or in "
+        "[1e-8, 1e8], not all 0, "
         "also the heel-strike weight: compass gait (delta q2, delta dq1, delta dq2), "
         "kneed walker (delta q2, delta q3, delta dq1, delta dq2, delta dq3); default all 1",
     )
@@ -54,7 +55,8 @@ def register(subparsers):
         "--r",
         default=None,
         metavar="R[,R2]",
-        help="LQR weight per second on each torque, > 0: one value for all, or one per "
+        help="LQR weight per second on each torque, in [1e-8, 1e8]: one value for all, "
+        "or one per "
         "torque (kneed walker: hip,knee); default 1",
     )
     p.add_argument(

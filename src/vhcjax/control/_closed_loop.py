@@ -31,7 +31,12 @@ from ._actuated import (
     num_inputs,
     simulate_closed_loop,
 )
-from ._feedback import HybridTransverseFeedback, TransverseFeedback, transverse_feedback
+from ._feedback import (
+    HybridTransverseFeedback,
+    TransverseFeedback,
+    check_torque_limit,
+    transverse_feedback,
+)
 from ._riccati import (
     RiccatiSolution,
     _pieces,
@@ -174,7 +179,9 @@ def stabilize(
     - `config`: `SolverConfig` of the hybrid steps (default `TIGHT_CONFIG`, 1e-12).
 
     **Returns:** a `Stabilization`. Jittable (`eqx.filter_jit`); `throw` is not offered:
-    inspect `result`.
+    inspect `result` (`orbit_not_closed` where `z` is not a gait, `bad_input` for an
+    invalid model). Weights of another shape, not symmetric, negative ($Q$) or not
+    positive ($R$), and a torque limit that is not positive, are a `ValueError`.
     """
     z = jnp.asarray(z, float)
     check_section_shape(model, z)
@@ -390,6 +397,7 @@ def _stabilize(
 ):
     # Weights, torque limit and gait as arrays: one compiled program serves them all.
     Q, R, Q_jump = _as_weights(model, Q, R, Q_jump)
+    check_torque_limit(torque_limit)
     return _stabilize_jit(
         model,
         jnp.asarray(z, float),

@@ -13,6 +13,7 @@ import equinox as eqx
 import jax
 import jax.core
 import jax.numpy as jnp
+import numpy as np
 
 
 def _cell(s, n):
@@ -109,10 +110,7 @@ class HybridTransverseFeedback(eqx.Module):
 def transverse_feedback(system, riccati, torque_limit: float | jax.Array = jnp.inf):
     """The `TransverseFeedback` of a `TransverseSystem` and its `RiccatiSolution` (a
     `HybridTransverseFeedback` for a `HybridTransverseSystem`)."""
-    if not isinstance(torque_limit, jax.core.Tracer) and not bool(
-        jnp.all(jnp.asarray(torque_limit) > 0)
-    ):
-        raise ValueError(f"torque_limit must be positive (N m; inf for none), got {torque_limit}")
+    check_torque_limit(torque_limit)
     limit = jnp.asarray(torque_limit, float)
     if hasattr(system, "domains"):
         return HybridTransverseFeedback(
@@ -126,8 +124,18 @@ def transverse_feedback(system, riccati, torque_limit: float | jax.Array = jnp.i
     )
 
 
+def check_torque_limit(torque_limit):
+    """A one-line `ValueError` unless a concrete `torque_limit` is positive (N m; `inf`
+    for none): a zero, negative or NaN limit would saturate every torque to nothing."""
+    if not isinstance(torque_limit, jax.core.Tracer) and not bool(
+        np.all(np.asarray(torque_limit) > 0)
+    ):
+        raise ValueError(f"torque_limit must be positive (N m; inf for none), got {torque_limit}")
+
+
 def with_torque_limit(feedback, torque_limit):
     """`feedback` with another saturation level (a leaf: no recompilation)."""
+    check_torque_limit(torque_limit)
     limit = jnp.asarray(torque_limit, float)
     if isinstance(feedback, HybridTransverseFeedback):
         return HybridTransverseFeedback(

@@ -90,8 +90,12 @@ def weight_matrix(name, W, k, default):
         )
     if not isinstance(W, jax.core.Tracer):
         w = np.asarray(W)
-        low = np.linalg.eigvalsh(0.5 * (w + w.T)).min() if np.isfinite(w).all() else np.nan
-        if not (np.isfinite(w).all() and np.allclose(w, w.T) and low >= 0):
+        finite = bool(np.isfinite(w).all())
+        scale = float(np.abs(w).max()) if finite and w.size else 0.0
+        low = np.linalg.eigvalsh(0.5 * (w + w.T)).min() if finite else np.nan
+        tol = 1e-12 * max(scale, 1e-300)  # rounding of a semidefinite matrix (v v^T)
+        symmetric = finite and np.allclose(w, w.T, rtol=1e-10, atol=tol)
+        if not (symmetric and low >= -tol):
             raise ValueError(f"{name} must be finite, symmetric and nonnegative definite")
         if name == "R" and low <= 0:
             raise ValueError("R must be positive definite (every input costs something)")

@@ -247,7 +247,9 @@ def transverse_system(model, x_plus, *, num_points=401):
       orbit and $\\Phi$ are integrated with fixed Tsit5 steps on this grid.
 
     **Returns:** a `TransverseSystem` (a `HybridTransverseSystem` for a multi-domain
-    model).
+    model). Its `result` is `orbit_not_closed` where the tabulated orbit does not come
+    back to `x_plus` (not a gait, or too coarse a grid) and `bad_input` for an invalid
+    model. A `ValueError` for an `x_plus` of another shape or `num_points` < 2.
     """
     x_plus = jnp.asarray(x_plus, float)
     check_state_shape(model, x_plus, "x_plus")
@@ -265,7 +267,7 @@ def transverse_system(model, x_plus, *, num_points=401):
     # an invalid model, or a state whose orbit does not come back to it: no gait
     code = system.result
     off = system.closure > GAIT_TOL * jnp.maximum(1.0, jnp.max(jnp.abs(x_plus)))
-    code = RESULTS.where((code == RESULTS.successful) & off, RESULTS.not_a_gait, code)
+    code = RESULTS.where((code == RESULTS.successful) & off, RESULTS.orbit_not_closed, code)
     code = RESULTS.where(model.validate(), code, RESULTS.bad_input)
     return eqx.tree_at(lambda t: t.result, system, code)
 

@@ -31,7 +31,7 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
       known default-model gait to `model` (homotopy in the parameters).
     - `solver`: VHC only: `"newton"` (default), `"lm"`, `"optimistix"` or `"optax"`.
     - `throw`: raise if no gait was found (a `ValueError` at once for a non-finite
-      guess; with `throw=False` that member is coded `bad_input`).
+      guess or an invalid model; with `throw=False` that gait is coded `bad_input`).
 
     Differentiable (`jax.grad`, `jax.jacfwd`, ...) with respect to every model parameter:
     exact derivatives by the implicit function theorem at the gait, never through the
@@ -191,6 +191,7 @@ def find_gaits(
     **Returns:** a `Gait` with a leading batch axis; check `result` per member.
     """
     _check(family, method)
+    _check_model(model)
     if vectorise is not None:
         warnings.warn(
             "find_gaits(vectorise=...) is ignored: every batch is one vectorised Newton loop",

@@ -212,7 +212,7 @@ def atlas_json(at):
             if at.slope is not None and not np.isfinite(r):
                 cell["spectral_radius_reason"] = "no period-1 gait found at the slope"
             if at.slope is None:
-                cell["spectral_radius_reason"] = "no slope given (--slope-deg)"
+                cell["spectral_radius_reason"] = "no slope given for the spectral radius"
             cells.append(cell)
     return {
         "mass_ratio": [float(m) for m in at.mass_ratio],

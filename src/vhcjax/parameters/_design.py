@@ -83,8 +83,9 @@ class DesignResult(eqx.Module):
 
     - `objective`, `vary`, `bounds`: as asked.
     - `result`: `"successful"` (projected gradient below tolerance), `"max_iterations"`,
-      `"no_descent"` (no step along the gradient improves the objective: a kink, see
-      `design`) or `"no_gait"` (no gait found along the step).
+      `"no_descent"` (no step along Adam's update or the projected gradient improves the
+      objective: typically a kink, see `design`) or `"no_gait"` (no gait found along the
+      step).
     - `initial`, `optimum`: dicts with `params` (all five parameters), `value`,
       `gradient` (per varied parameter, of the objective in its own units), and for the
       optimum `x0` (post-impact state), `multipliers` (complex), `spectral_radius` and
@@ -159,10 +160,11 @@ def design(
     Every iterate is a gait found by Newton from the previous iterate's gait
     (continuation), and no worse than the last: an update whose gait is not found, or
     that makes the objective worse, is halved (back toward the last iterate) up to 7
-    times, else the design stops with `"no_gait"` (no gait found on the way) or
-    `"no_descent"` (gaits found, none better: the last iterate is within a 128th of a
-    step of a point the gradient cannot improve, typically a kink of the spectral
-    radius, where a complex pair of multipliers meets the real axis).
+    times; if no halving helps, a projected steepest-descent step of the same length is
+    tried the same way. If neither helps, the design stops with `"no_gait"` (no gait
+    found on the way) or `"no_descent"` (gaits found, none better: down to a 128th of a
+    step, neither direction improves the objective; typically a kink of the spectral
+    radius, where a complex pair of multipliers meets the real axis, or a local minimum).
 
     **Returns:** a `DesignResult`.
     """
@@ -237,17 +239,26 @@ def design(
             k -= 1
             break
         upd, state = opt.update(jnp.asarray(sense * grad * (hi - lo)), state)
-        u_new = np.clip(u + np.asarray(upd), 0.0, 1.0)
-        found = False
-        for _ in range(_HALVINGS + 1):
-            x_new = lo + u_new * (hi - lo)
-            v_new, grad_new, gait_new = _evaluate(base, vary, x_new, objective, guess)
-            ok = bool(gait_new.result == RESULTS.successful) and np.isfinite(v_new)
-            found |= ok
-            if ok and sense * v_new <= sense * v:  # a gait, and no worse: accepted
+        adam = np.clip(u + np.asarray(upd), 0.0, 1.0)
+        # Adam's step first; where no halving of it helps (its momentum may point uphill),
+        # a projected steepest-descent step of the same length
+        g_u = -sense * grad * (hi - lo)
+        length = float(np.linalg.norm(adam - u))
+        steepest = np.clip(u + length * g_u / max(float(np.linalg.norm(g_u)), 1e-300), 0.0, 1.0)
+        found = accepted = False
+        for u_new in (adam, steepest):
+            for _ in range(_HALVINGS + 1):
+                x_new = lo + u_new * (hi - lo)
+                v_new, grad_new, gait_new = _evaluate(base, vary, x_new, objective, guess)
+                ok = bool(gait_new.result == RESULTS.successful) and np.isfinite(v_new)
+                found |= ok
+                if ok and sense * v_new <= sense * v:  # a gait, and no worse: accepted
+                    accepted = True
+                    break
+                u_new = 0.5 * (u + u_new)
+            if accepted:
                 break
-            u_new = 0.5 * (u + u_new)
-        else:
+        if not accepted:
             result = "no_descent" if found else "no_gait"
             k -= 1
             break

@@ -561,7 +561,9 @@ def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG, *, iterations=20, h=1e-6
     (autodiff through each heel strike): the compiled one-step programs serve every $k$.
     Newton stops at a residual below 1e-12 (`successful`), after `iterations`
     (`not_converged`), or at a failed step (its code; `residual` is then `inf`: the
-    failed map holds its state, which is no convergence).
+    failed map holds its state, which is no convergence). An invalid model is
+    `bad_input`, with zero periods and multipliers (nothing computed); a `k` that is not
+    a positive integer, or a `z0` of another shape, is a `ValueError`.
     """
     if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
         raise ValueError(f"k must be a positive integer (steps per period), got {k!r}")
