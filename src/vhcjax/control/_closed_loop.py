@@ -181,7 +181,7 @@ def stabilize(
     **Returns:** a `Stabilization`. Jittable (`eqx.filter_jit`); `throw` is not offered:
     inspect `result` (`orbit_not_closed` where `z` is not a gait, `bad_input` for an
     invalid model). Weights of another shape, not symmetric, negative ($Q$) or not
-    positive ($R$), and a torque limit that is not positive, are a `ValueError`.
+    positive ($R$), and a negative or NaN torque limit, are a `ValueError`.
     """
     z = jnp.asarray(z, float)
     check_section_shape(model, z)

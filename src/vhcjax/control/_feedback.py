@@ -125,12 +125,15 @@ def transverse_feedback(system, riccati, torque_limit: float | jax.Array = jnp.i
 
 
 def check_torque_limit(torque_limit):
-    """A one-line `ValueError` unless a concrete `torque_limit` is positive (N m; `inf`
-    for none): a zero, negative or NaN limit would saturate every torque to nothing."""
+    """A one-line `ValueError` unless a concrete `torque_limit` is nonnegative (N m; `inf`
+    for none, 0 for the passive walker through the same program): a negative limit would
+    flip the torques' sign, a NaN one make them NaN."""
     if not isinstance(torque_limit, jax.core.Tracer) and not bool(
-        np.all(np.asarray(torque_limit) > 0)
+        np.all(np.asarray(torque_limit) >= 0)
     ):
-        raise ValueError(f"torque_limit must be positive (N m; inf for none), got {torque_limit}")
+        raise ValueError(
+            f"torque_limit must be >= 0 (N m; inf for none, 0 for no torque), got {torque_limit}"
+        )
 
 
 def with_torque_limit(feedback, torque_limit):
