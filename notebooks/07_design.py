@@ -59,8 +59,8 @@ print(f"spectral radius {float(rho):.6f}, d/dmH = {float(drho):.6f} per kg")
 
 # %% [markdown]
 # ## The most robust walker at 3 degrees
-# Projected Adam over the hip mass (5 to 30 kg) and the distance `b` from foot to the
-# leg's centre of mass (0.3 to 0.7 m; `a` stays 0.5 m).
+# Projected Adam, then gradient sampling, over the hip mass (5 to 30 kg) and the
+# distance `b` from foot to the leg's centre of mass (0.3 to 0.7 m; `a` stays 0.5 m).
 
 # %%
 res = vj.design(
@@ -87,11 +87,10 @@ print(
 print("multipliers at the optimum:", np.round(res.optimum["multipliers"], 5))
 
 # %% [markdown]
-# A run that ends with `no_descent` stopped where no step along the gradient helps:
-# typically where a complex pair of multipliers meets the real axis and the spectral
-# radius is not differentiable. The minimum of a spectral radius usually lies on such
-# points, so a gradient method can stall there short of the minimum. A batched grid of
-# gaits over the same bounds is the check.
+# The minimum of a spectral radius usually lies where a complex pair of multipliers
+# meets the real axis, where the radius is not differentiable: Adam stalls there, and the
+# design goes on by gradient sampling along that kink (the `step` of each history
+# entry). A batched grid of gaits over the same bounds is the independent check.
 
 # %%
 n = 40 if FULL else 8

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import vhcjax as vj
-from vhcjax.parameters._design import with_parameters
+from vhcjax.parameters._design import min_norm_element, with_parameters
 
 
 def _stable_z(model):
@@ -73,6 +73,72 @@ def test_design_spectral_radius():
     rhos = np.asarray(vj.gait_spectrum(model, gs).spectral_radius)[ok]
     assert ok.sum() > 40
     assert rhos.min() > res.optimum["value"] - 1e-4, (rhos.min(), res.optimum["value"])
+
+
+def test_min_norm_element_against_every_support():
+    """Wolfe's method against the smallest affine minimum-norm point over every subset
+    of rows that lies in its hull (duplicates and badly scaled columns included)."""
+    import itertools
+
+    def brute(G):
+        best = G[np.argmin((G * G).sum(1))]
+        for r in range(2, len(G) + 1):
+            for S in itertools.combinations(range(len(G)), r):
+                Q = G[list(S)] @ G[list(S)].T
+                K = np.block([[Q, np.ones((r, 1))], [np.ones((1, r)), np.zeros((1, 1))]])
+                lam = np.linalg.lstsq(K, np.r_[np.zeros(r), 1.0], rcond=None)[0][:r]
+                if lam.min() >= -1e-12 and abs(lam.sum() - 1.0) < 1e-9:
+                    d = lam @ G[list(S)]
+                    best = d if d @ d < best @ best else best
+        return best
+
+    rng = np.random.default_rng(1)
+    for trial in range(120):
+        k, n = rng.integers(1, 5), rng.integers(1, 9)
+        G = rng.normal(size=(n, k)) + rng.normal(size=k) * rng.uniform(0, 3)
+        if trial % 3 == 0:
+            G = np.vstack([G, G[:2]])
+        if trial % 5 == 0:
+            G[:, 0] *= 1e3
+        d, ref = min_norm_element(G), brute(G)
+        assert abs(np.linalg.norm(d) - np.linalg.norm(ref)) < 1e-9 * max(1.0, np.abs(G).max())
+    # two gradients on either side of a kink: the shortest combination runs along it
+    d = min_norm_element(np.array([[1.0, 1.0], [-1.0, 1.0]]))
+    assert np.allclose(d, [0.0, 1.0])
+
+
+def test_design_spectral_radius_along_a_kink():
+    """Over (mH, b) the minimum lies where a complex pair of multipliers meets the real
+    axis: Adam stalls there, gradient sampling goes on along the kink to the minimum
+    (here on the bound mH = 30 kg), which batched grids confirm."""
+    m0 = vj.CompassGait()
+    bounds = {"mass-hip": (5.0, 30.0), "b": (0.3, 0.7)}
+    res = vj.design("spectral-radius", ["mass-hip", "b"], model=m0, bounds=bounds, steps=40)
+    assert res.result == "successful", res.result
+    assert res.sampling_radius is not None  # the kink was met
+    assert res.stationarity < 1e-4 * abs(res.initial["gradient"]["b"]) * 0.4
+    values = [h["value"] for h in res.history]
+    assert all(b <= a for a, b in zip(values, values[1:]))
+    # re-solved from scratch gives the reported value
+    g = vj.find_gait(res.model, method="shooting")
+    assert abs(float(vj.gait_spectrum(res.model, g).spectral_radius) - res.optimum["value"]) < 1e-9
+    # a grid over the whole box, and a fine one around the optimum, find nothing better
+    # (64 members each: the batched programs of `test_design_spectral_radius`)
+    z, opt = np.asarray(g.z), res.optimum["params"]
+    for mh, b in (
+        (np.linspace(5.0, 30.0, 8), np.linspace(0.3, 0.7, 8)),
+        (
+            np.clip(opt["mass-hip"] + np.linspace(-1.0, 1.0, 4), 5.0, 30.0),
+            opt["b"] + np.linspace(-3e-3, 3e-3, 16),
+        ),
+    ):
+        H, Bb = np.meshgrid(mh, b, indexing="ij")
+        model = vj.CompassGait(mH=jnp.asarray(H.ravel()), b=jnp.asarray(Bb.ravel()))
+        gs = vj.find_gaits(model, jnp.asarray(np.tile(z, (H.size, 1))), method="shooting")
+        ok = np.asarray(gs.result == vj.RESULTS.successful)
+        rho = np.asarray(vj.gait_spectrum(model, gs).spectral_radius)[ok]
+        assert ok.sum() > 0.5 * H.size
+        assert rho.min() > res.optimum["value"] - 1e-6, (rho.min(), res.optimum["value"])
 
 
 def test_atlas_against_bifurcation_and_scaling(monkeypatch):

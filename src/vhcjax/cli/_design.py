@@ -42,8 +42,9 @@ def register(subparsers):
         description="Optimise the compass gait's parameters within bounds for an objective "
         "of its stable gait at --slope-deg: the spectral radius (minimised), the slope where "
         "the gait period-doubles (maximised) or the speed (maximised). Projected Adam "
-        "(optax) on exact gradients (implicit function theorem at each gait); every iterate "
-        "is a converged gait continued from the last. The model flags give the start.",
+        "(optax) on exact gradients (implicit function theorem at each gait), then gradient "
+        "sampling where the objective has a kink; every iterate is a converged gait "
+        "continued from the last, no worse than the last. The model flags give the start.",
     )
     add_model_flags(p)
     p.add_argument("--objective", required=True, choices=OBJECTIVES)
@@ -286,10 +287,13 @@ def run_design(args):
                 "iteration": h["iteration"],
                 "params": _params_json(h["params"]),
                 "value": value(h["value"]),
+                "step": h["step"],
             }
             for h in res.history
         ],
         "projected_gradient": res.projected_gradient,
+        "stationarity": res.stationarity,
+        "sampling_radius": res.sampling_radius,
         "result_reason": _REASONS[res.result],
         "units": {
             "value": "deg" if flip else ("m/s" if args.objective == "speed" else "-"),
@@ -318,17 +322,17 @@ def run_design(args):
 
 #: What each `DesignResult.result` means (the JSON's `result_reason`).
 _REASONS = {
-    "successful": "the projected gradient vanished (relative gtol)",
-    "max_iterations": "the iteration limit (--steps) was reached before the gradient vanished",
-    "no_descent": (
-        "no step along Adam's update or along the projected gradient (each halved 7 "
-        "times) improves the objective: the design stopped where the gradient cannot "
-        "improve it at this scale, typically where the objective is not differentiable "
-        "(for the spectral radius, where a complex pair of multipliers meets the real "
-        "axis); the gradient need not vanish there, and a grid over the bounds is the "
-        "check of optimality"
+    "successful": (
+        "a stationary point: the projected gradient vanished (relative gtol), or, where "
+        "the objective has a kink, the shortest vector in the convex hull of gradients "
+        "sampled within sampling_radius of the optimum did (stationarity)"
     ),
-    "no_gait": "no gait was found along the step from the last iterate",
+    "max_iterations": "the iteration limit (--steps) was reached before a stationary point",
+    "no_descent": (
+        "gradient sampling found no step that improves the objective, down to its "
+        "smallest radius, and no stationary point either"
+    ),
+    "no_gait": "no gait was found along the last step from the last iterate",
 }
 
 

@@ -12,7 +12,11 @@ Objectives (all at the design slope, stable family, shooting on the step map):
 - `"speed"`: maximise the mean speed (step length over period, m/s).
 
 The optimiser works on the parameters scaled to $u \\in [0, 1]$ within their bounds;
-after each update $u$ is projected back onto the box (projected Adam).
+after each update $u$ is projected back onto the box (projected Adam). Where Adam's step
+fails (a kink of the objective: for the spectral radius, where a complex pair of
+multipliers meets the real axis), the design goes on by gradient sampling (Burke, Lewis
+and Overton 2005): the shortest vector in the convex hull of gradients sampled near the
+iterate is a descent direction along the kink.
 """
 
 import math
@@ -49,6 +53,12 @@ DEFAULT_BOUNDS = {
 OBJECTIVES = ("spectral-radius", "flip-slope", "speed")
 #: Halvings of a step that finds no gait or makes the objective worse.
 _HALVINGS = 7
+#: Halvings of a gradient-sampling step (Armijo backtracking).
+_SAMPLED_HALVINGS = 12
+#: Sufficient decrease of a gradient-sampling step: `_ARMIJO * t * |d|^2`.
+_ARMIJO = 1e-4
+#: Gradient sampling stops when its radius (scaled coordinates) falls below this.
+_MIN_RADIUS = 1e-5
 #: +1: minimised as is; -1: maximised (the optimiser minimises -value).
 _SENSE = {"spectral-radius": 1.0, "flip-slope": -1.0, "speed": -1.0}
 
@@ -82,10 +92,10 @@ class DesignResult(eqx.Module):
     """The outcome of `design` (host values).
 
     - `objective`, `vary`, `bounds`: as asked.
-    - `result`: `"successful"` (projected gradient below tolerance), `"max_iterations"`,
-      `"no_descent"` (no step along Adam's update or the projected gradient improves the
-      objective: typically a kink, see `design`) or `"no_gait"` (no gait found along the
-      step).
+    - `result`: `"successful"` (a stationary point: the projected gradient, or at a kink
+      the shortest sampled gradient, below tolerance), `"max_iterations"`,
+      `"no_descent"` (gradient sampling found no step that improves the objective, down
+      to its smallest radius) or `"no_gait"` (no gait found along the last step).
     - `initial`, `optimum`: dicts with `params` (all five parameters), `value`,
       `gradient` (per varied parameter, of the objective in its own units), and for the
       optimum `x0` (post-impact state), `multipliers` (complex), `spectral_radius` and
@@ -93,8 +103,14 @@ class DesignResult(eqx.Module):
       walkers).
     - `projected_gradient`: max-norm of the projected gradient at the optimum, in the
       scaled coordinates $u \\in [0, 1]$.
-    - `history`: one dict per iterate: `iteration`, `params`, `value`.
+    - `history`: one dict per iterate: `iteration`, `params`, `value`, `step` (how it
+      was reached: `"start"`, `"adam"` or `"gradient sampling"`).
     - `model`: the optimal model.
+    - `stationarity`, `sampling_radius`: where the design went on by gradient sampling,
+      the max-norm of the shortest vector in the convex hull of the projected gradients
+      sampled within `sampling_radius` (scaled coordinates) of the optimum: a measure of
+      Clarke stationarity at a kink, where `projected_gradient` need not vanish; `None`
+      where Adam's steps reached the end.
     """
 
     objective: str = eqx.field(static=True)
@@ -107,6 +123,8 @@ class DesignResult(eqx.Module):
     projected_gradient: float = eqx.field(static=True)
     history: list = eqx.field(static=True)
     model: CompassGait
+    stationarity: float | None = eqx.field(static=True, default=None)
+    sampling_radius: float | None = eqx.field(static=True, default=None)
 
 
 def _evaluate(base, vary, x, objective, guess):
@@ -128,6 +146,38 @@ def projected_gradient(u, grad_u, sense):
     at_lo = (u <= 0.0) & (gm > 0)
     at_hi = (u >= 1.0) & (gm < 0)
     return np.where(at_lo | at_hi, 0.0, gm)
+
+
+def min_norm_element(G):
+    """The shortest vector in the convex hull of the rows of `G`: Wolfe's (1976) finite
+    active-set method (the affine minimum-norm point of a growing corral of rows)."""
+    P = np.asarray(G, float)
+    tol = 1e-12 * max(float(np.einsum("ij,ij->i", P, P).max()), 1e-300)
+    S = [int(np.argmin(np.einsum("ij,ij->i", P, P)))]
+    lam = np.ones(1)
+    x = P[S[0]]
+    for _ in range(50 * len(P)):  # major cycles: add the row most opposed to x
+        j = int(np.argmin(P @ x))
+        if x @ x - P[j] @ x <= tol or j in S:
+            break
+        S.append(j)
+        lam = np.append(lam, 0.0)
+        while True:  # minor cycles: move to the corral's affine minimum, dropping rows
+            r = len(S)
+            K = np.block([[P[S] @ P[S].T, np.ones((r, 1))], [np.ones((1, r)), np.zeros((1, 1))]])
+            y = np.linalg.lstsq(K, np.r_[np.zeros(r), 1.0], rcond=None)[0][:r]
+            if (y > 1e-14).all():
+                lam = y
+                break
+            neg = y <= 1e-14
+            theta = min(1.0, float(np.min(lam[neg] / (lam[neg] - y[neg]))))
+            lam = theta * y + (1.0 - theta) * lam
+            keep = lam > 1e-14
+            keep[np.argmax(lam)] = True
+            S = [i for i, k in zip(S, keep) if k]
+            lam = lam[keep] / lam[keep].sum()
+        x = lam @ P[S]
+    return x
 
 
 def design(
@@ -152,19 +202,27 @@ def design(
     - `model`: the starting `CompassGait` (its `psi` is the design slope); default
       thesis Table 1 at 3 degrees. It must have a stable gait.
     - `bounds`: `{name: (lo, hi)}` for some of `vary` (others: `DEFAULT_BOUNDS`).
-    - `steps`: Adam iterations at most; `learning_rate`: in the scaled coordinates.
+    - `steps`: iterations at most (accepted steps); `learning_rate`: Adam's, in the
+      scaled coordinates.
     - `gtol`: stop when the projected gradient (scaled coordinates, relative to the
       objective's scale at the start) is below it.
     - `callback`: called with each history entry (progress).
 
     Every iterate is a gait found by Newton from the previous iterate's gait
-    (continuation), and no worse than the last: an update whose gait is not found, or
-    that makes the objective worse, is halved (back toward the last iterate) up to 7
-    times; if no halving helps, a projected steepest-descent step of the same length is
-    tried the same way. If neither helps, the design stops with `"no_gait"` (no gait
-    found on the way) or `"no_descent"` (gaits found, none better: down to a 128th of a
-    step, neither direction improves the objective; typically a kink of the spectral
-    radius, where a complex pair of multipliers meets the real axis, or a local minimum).
+    (continuation), and no worse than the last: an Adam update whose gait is not found,
+    or that makes the objective worse, is halved (back toward the last iterate) up to 7
+    times. If no halving helps (typically a kink of the spectral radius, where a complex
+    pair of multipliers meets the real axis and the gradient jumps), the design goes on
+    by gradient sampling: `2 len(vary)` gradients at random points within a radius
+    (first `learning_rate`, scaled coordinates) of the iterate, projected onto the box;
+    the shortest vector `d` in the convex hull of these, the iterate's gradient and
+    those of failed line-search points within the radius; a step along `-d` by Armijo
+    backtracking (halved until a trial lies within the radius; where none descends, once
+    more with the failed trials' gradients). Where `d` is below tolerance, or no step
+    along it descends, the radius shrinks tenfold; below 1e-5 the design stops, with
+    `"successful"` (Clarke-stationary: `d` below tolerance within some radius),
+    `"no_descent"` or `"no_gait"`. The samples come from a fixed seed: a design is
+    reproducible.
 
     **Returns:** a `DesignResult`.
     """
@@ -215,62 +273,114 @@ def design(
     guess = np.asarray(gait.z)
     scale = max(np.abs(grad * (hi - lo)).max(), 1e-12)
 
-    def entry(k, x, v):
-        return {"iteration": k, "params": parameters_of(with_parameters(base, vary, x)), "value": v}
+    def entry(k, x, v, step):
+        params = parameters_of(with_parameters(base, vary, x))
+        return {"iteration": k, "params": params, "value": v, "step": step}
 
     initial = {
         "params": parameters_of(with_parameters(base, vary, x)),
         "value": v,
         "gradient": dict(zip(vary, map(float, grad))),
     }
-    history = [entry(0, x, v)]
+    history = [entry(0, x, v, "start")]
     if callback is not None:
         callback(history[-1])
+    found = [True]  # whether the last failed line search found any gait
+    bundle = []  # (u, gradient) of every point evaluated since the last accepted step
+
+    def evaluate(u_new):
+        """`(u, x, value, gradient, gait)` at scaled parameters `u_new`; `None` without
+        a gait (Newton from the last iterate's gait: continuation)."""
+        x_new = lo + u_new * (hi - lo)
+        v_new, grad_new, gait_new = _evaluate(base, vary, x_new, objective, guess)
+        if not (bool(gait_new.result == RESULTS.successful) and np.isfinite(v_new)):
+            return None
+        bundle.append((u_new, grad_new))
+        return u_new, x_new, v_new, grad_new, gait_new
+
+    def line_search(path, slope, halvings):
+        """The first of `path(1), path(1/2), ...` with a gait and `sense * value` at most
+        `sense * v - slope * t` (Armijo; `slope = 0`: no worse than the last)."""
+        found[0] = False
+        t = 1.0
+        for _ in range(halvings + 1):
+            trial = evaluate(path(t))
+            if trial is not None:
+                found[0] = True
+                if sense * trial[2] <= sense * v - slope * t:
+                    return trial
+            t *= 0.5
+        return None
+
     # A decaying rate: Adam steps have the size of the rate whatever the gradient, so the
     # iterates settle only as it shrinks.
     opt = optax.adam(optax.exponential_decay(learning_rate, 1, 0.92))
     u = (x - lo) / (hi - lo)
     state = opt.init(jnp.asarray(u))
-    result, k = "max_iterations", 0
+    result, k, sampling = "max_iterations", 0, False
+    radius, stationarity, certified, retried = learning_rate, None, None, False
+    rng = np.random.default_rng(0)
     pg = projected_gradient(u, grad * (hi - lo), sense)
-    for k in range(1, steps + 1):
-        if np.abs(pg).max() < gtol * scale:
+    while k < steps:
+        if not sampling and np.abs(pg).max() < gtol * scale:
             result = "successful"
-            k -= 1
             break
-        upd, state = opt.update(jnp.asarray(sense * grad * (hi - lo)), state)
-        adam = np.clip(u + np.asarray(upd), 0.0, 1.0)
-        # Adam's step first; where no halving of it helps (its momentum may point uphill),
-        # a projected steepest-descent step of the same length
-        g_u = -sense * grad * (hi - lo)
-        length = float(np.linalg.norm(adam - u))
-        steepest = np.clip(u + length * g_u / max(float(np.linalg.norm(g_u)), 1e-300), 0.0, 1.0)
-        found = accepted = False
-        for u_new in (adam, steepest):
-            for _ in range(_HALVINGS + 1):
-                x_new = lo + u_new * (hi - lo)
-                v_new, grad_new, gait_new = _evaluate(base, vary, x_new, objective, guess)
-                ok = bool(gait_new.result == RESULTS.successful) and np.isfinite(v_new)
-                found |= ok
-                if ok and sense * v_new <= sense * v:  # a gait, and no worse: accepted
-                    accepted = True
+        if not sampling:
+            # 1. Adam (optax): its step, halved back toward the last iterate until it
+            # finds a gait no worse than the last
+            upd, state = opt.update(jnp.asarray(sense * grad * (hi - lo)), state)
+            u_new = np.clip(u + np.asarray(upd), 0.0, 1.0)
+            step = line_search(lambda t: u + t * (u_new - u), 0.0, _HALVINGS)
+            if step is None:  # a kink (or momentum uphill): gradient sampling from here on
+                sampling = True
+                continue
+        else:
+            # 2. gradient sampling: the shortest vector in the convex hull of gradients
+            # sampled within `radius` is a descent direction at a kink (components held
+            # at a bound by the iterate's own gradient are left out)
+            for _ in range(2 * len(vary)):
+                du = rng.normal(size=u.size)
+                du *= radius * rng.uniform() ** (1.0 / u.size) / np.linalg.norm(du)
+                evaluate(np.clip(u + du, 0.0, 1.0))
+            # with the points of failed line searches within the radius: across a kink,
+            # they hold the gradients of its other side
+            grads = [grad] + [g for w, g in bundle if np.linalg.norm(w - u) <= radius]
+            held = projected_gradient(u, grad * (hi - lo), sense) != sense * grad * (hi - lo)
+            d = min_norm_element(np.where(held, 0.0, sense * np.array(grads) * (hi - lo)))
+            stationarity = float(np.abs(d).max())
+            step = None
+            if stationarity < gtol * scale:  # stationary within this radius
+                certified = (radius, stationarity)
+            else:
+                # halved until a trial lies within the radius: a failed search leaves
+                # gradients there for the next round
+                n = max(_SAMPLED_HALVINGS, math.ceil(math.log2(np.linalg.norm(d) / radius)) + 1)
+                step = line_search(
+                    lambda t: np.clip(u - t * d, 0.0, 1.0), _ARMIJO * float(d @ d), n
+                )
+                if step is None and not retried:  # again, with the failed trials' gradients
+                    retried = True
+                    continue
+            if step is None:  # stationary, or no descent at this radius: look closer
+                retried = False
+                radius *= 0.1
+                if radius < _MIN_RADIUS:
+                    result = "successful" if certified else "no_descent"
                     break
-                u_new = 0.5 * (u + u_new)
-            if accepted:
-                break
-        if not accepted:
-            result = "no_descent" if found else "no_gait"
-            k -= 1
-            break
-        u, x, v, grad, gait = u_new, x_new, v_new, grad_new, gait_new
+                continue
+            certified, retried = None, False
+        k += 1
+        u, x, v, grad, gait = step
+        bundle.clear()
         guess = np.asarray(gait.z)
         pg = projected_gradient(u, grad * (hi - lo), sense)
-        history.append(entry(k, x, v))
+        history.append(entry(k, x, v, "gradient sampling" if sampling else "adam"))
         if callback is not None:
             callback(history[-1])
-    else:
-        if np.abs(pg).max() < gtol * scale:
-            result = "successful"
+    if result == "max_iterations" and not sampling and np.abs(pg).max() < gtol * scale:
+        result = "successful"
+    if result == "no_descent" and not found[0]:
+        result = "no_gait"
     best = with_parameters(base, vary, x)
     spec = gait_spectrum(best, gait)
     optimum = {
@@ -283,7 +393,18 @@ def design(
         "stable": bool(spec.spectral_radius < 1.0),
     }
     return DesignResult(
-        objective, vary, bounds, result, k, initial, optimum, float(np.abs(pg).max()), history, best
+        objective,
+        vary,
+        bounds,
+        result,
+        k,
+        initial,
+        optimum,
+        float(np.abs(pg).max()),
+        history,
+        best,
+        certified[1] if certified else stationarity,
+        certified[0] if certified else (radius if sampling else None),
     )
 
 

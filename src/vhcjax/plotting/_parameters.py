@@ -38,6 +38,20 @@ def plot_design(result, path, slope_deg):
             label=f"{name}: {lo:g} to {hi:g} {UNITS[name]}",
         )
     ax2.set_ylim(-0.05, 1.05)
+    sampled = [h["iteration"] for h in result.history if h.get("step") == "gradient sampling"]
+    if sampled:  # where Adam stalled at a kink and gradient sampling took over
+        for ax in (ax1, ax2):
+            ax.axvline(sampled[0] - 0.5, color="0.5", linestyle=":")
+        ax1.annotate(
+            "gradient sampling from here",
+            (sampled[0] - 0.5, 1.0),
+            xycoords=("data", "axes fraction"),
+            xytext=(4, -4),
+            textcoords="offset points",
+            va="top",
+            fontsize=8,
+            color="0.3",
+        )
     ax2.set_xlabel("iteration (-)")
     ax2.set_ylabel("position within bounds (-)")
     ax2.legend()
