@@ -89,6 +89,7 @@ def test_stabilize_json_and_png(tmp_path, capsys):
     x0, xf = np.array(sim["x0"]), np.array(sim["x_final"])
     np.testing.assert_allclose(x0[[0, 2, 3]], z + 0.01, atol=1e-12)
     np.testing.assert_allclose(xf[[0, 2, 3]], z, atol=1e-8)
+    assert sim["recovered"] is True and "recovered_reason" not in sim
     b = out["basin"]
     assert b["passive_fraction"] == 0.0 and b["closed_loop_fraction"] > 0.5
     assert png.stat().st_size > 10_000
@@ -97,7 +98,8 @@ def test_stabilize_json_and_png(tmp_path, capsys):
 def test_without_basin_the_fractions_are_null_with_a_reason(capsys):
     argv = ["stabilize", "--steps", "30", "--perturbation", "1.0", "--json"]
     assert cli.main(argv) == 0
-    out = json.loads(capsys.readouterr().out, parse_constant=_no_constants)
+    captured = capsys.readouterr()
+    out = json.loads(captured.out, parse_constant=_no_constants)
     assert out["basin"]["passive_fraction"] is None
     assert out["basin"]["closed_loop_fraction"] is None and out["basin"]["reason"]
     # so far off the gait both walkers fall at once: no final error, and why
@@ -105,3 +107,19 @@ def test_without_basin_the_fractions_are_null_with_a_reason(capsys):
     assert sim["result"] == "fell" and sim["steps_completed"] == 0
     assert sim["final_error"] is None and sim["final_error_reason"].startswith("fell after 0")
     assert sim["passive_final_error"] is None and sim["passive_final_error_reason"]
+    # locally stable, but this start was not recovered: said beside the verdict
+    assert out["stable"] is True and sim["recovered"] is False
+    assert "not recovered (ended fell after 0 steps)" in sim["recovered_reason"]
+    assert "warning: stable is the local verdict" in captured.err
+
+
+def test_a_saturated_torque_says_the_perturbation_was_not_recovered(capsys):
+    argv = ["stabilize", "--torque-limit", "0.001", "--json"]
+    assert cli.main(argv) == 0
+    out = json.loads(capsys.readouterr().out, parse_constant=_no_constants)
+    sim = out["simulation"]
+    assert out["stable"] is True and sim["max_abs_torque"] <= 0.001
+    # the unstable gait drifts away as if passive: the error equals the passive one
+    assert sim["recovered"] is False and sim["final_error"] > 0.1
+    assert abs(sim["final_error"] - sim["passive_final_error"]) < 0.01
+    assert "torque limit of 0.001 N m saturates" in sim["recovered_reason"]

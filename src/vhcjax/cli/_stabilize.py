@@ -17,6 +17,7 @@ from ._common import (
     number,
     print_json,
     walker_from_args,
+    warn,
 )
 
 FAMILIES = ("unstable", "stable")
@@ -307,6 +308,29 @@ def run_stabilize(args):
                 f"{out['simulation'][res]} after {done} of {args.steps} steps; "
                 + ("x_final is the last state reached" if key == "final_error" else "")
             ).rstrip("; ")
+    # the verdict is local (multipliers); the simulation says whether this perturbation
+    # came back: a saturated torque or a start outside the basin may keep it away
+    sim_out = out["simulation"]
+    sim_out["recovered"] = bool(
+        int(sim.num_successful) == args.steps and err_c[-1] <= 0.1 * args.perturbation
+    )
+    if stable and not sim_out["recovered"]:
+        how = (
+            f"ended {sim_out['result']} after {int(sim.num_successful)} steps"
+            if int(sim.num_successful) < args.steps
+            else f"error {err_c[-1]:.3g} after {args.steps} steps"
+        )
+        cause = (
+            f"the torque limit of {args.torque_limit:g} N m saturates the feedback"
+            if args.torque_limit is not None
+            else "the perturbation may lie outside the closed-loop basin"
+        )
+        sim_out["recovered_reason"] = (
+            f"stable is the local verdict (closed-loop multipliers inside the unit circle), "
+            f"but the simulation from +{args.perturbation:g} was not recovered ({how}): "
+            f"{cause}"
+        )
+        warn(args, sim_out["recovered_reason"])
     basin_plot = None
     if args.basin:
         kw = {
