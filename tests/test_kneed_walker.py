@@ -57,6 +57,16 @@ def test_converges_from_perturbed_start(kw, gait):
     assert np.max(np.abs(z_end - gait.z)) < 1e-9
 
 
+def test_a_hyperextended_knee_is_not_a_start(kw, gait):
+    """A start with the swing knee bent backward (flexion q2 - q3 < 0, past the knee
+    stop) is out of the leg's range: `fell`, with no step taken."""
+    x0 = kw.section_to_state(gait.z).at[2].add(0.2)  # q3 = q2 + 0.2: flexion -0.2 rad
+    sim = simulate_jit(kw, x0, 100)
+    assert sim.result == RESULTS.fell and int(sim.num_successful) == 0
+    straight = simulate_jit(kw, kw.section_to_state(gait.z).at[2].add(1e-12), 100)
+    assert straight.result == RESULTS.successful  # rounding below the stop is no fault
+
+
 def test_energy_conserved_within_each_phase_and_lost_at_impacts(kw, gait):
     ts, xs, info = trajectory_jit(kw, gait.x0, 40)
     assert np.all(np.asarray(info.result._value) == RESULTS.successful._value)

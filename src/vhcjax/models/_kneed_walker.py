@@ -28,6 +28,8 @@ from ..hybrid import (
 )
 
 _KNEE = np.array([[0.0, 1.0, -1.0]])  # A q = q2 - q3 = 0: knee locked
+#: Knee flexion below which a state entering the unlocked domain is hyperextended (rad).
+_KNEE_TOL = 1e-9
 
 
 class KneedWalker(MultiDomainModel):
@@ -183,10 +185,11 @@ class KneedWalker(MultiDomainModel):
         return q[0] + q[1] + 2 * self.psi
 
     def domain_admissible(self, i, x):
-        """Entering the locked domain the swing leg must be ahead of the stance leg
-        (else its straightened foot is below the slope)."""
+        """Entering the unlocked domain the knee must not be hyperextended (flexion at
+        least -1e-9 rad: the knee stop); entering the locked domain the swing leg must be
+        ahead of the stance leg (else its straightened foot is below the slope)."""
         if i == 0:
-            return jnp.asarray(True)
+            return self.knee_angle(x[:3]) >= -_KNEE_TOL
         return x[1] > x[0]
 
     def domain_reset(self, i, x_minus):
