@@ -271,6 +271,13 @@ def test_multipliers_only_of_a_gait_of_a_valid_model(gaits3):
     assert vhcjax.result_names(bad.result) == "bad_input" and not bool(bad.stable)
     with pytest.raises(ValueError, match="3 section coordinates"):
         vhcjax.gait_multipliers(m, m.section_to_state(jnp.asarray(z)))
+    # a result holding the gait (a `Gait`, a fixed point) is taken at its section point
+    fp = S._fixed_point_jit(m, jnp.asarray(z), 1, config=vhcjax.DEFAULT_CONFIG)
+    np.testing.assert_allclose(
+        np.asarray(vhcjax.gait_multipliers(m, fp).poincare),
+        np.asarray(vhcjax.gait_multipliers(m, fp.z).poincare),
+        atol=0,
+    )
 
 
 def test_library_inputs_refused_with_the_shape_or_range_expected():

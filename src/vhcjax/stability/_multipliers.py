@@ -253,7 +253,8 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, transverse=Tru
 
 
 def gait_multipliers(model, z, config=DEFAULT_CONFIG, *, transverse=True):
-    """Both multiplier computations at the period-1 gait with section coordinates `z`:
+    """Both multiplier computations at the period-1 gait with section coordinates `z`
+    (or at a `Gait`, as `find_gait` returns it):
     `transverse` (eigenvalues of Xi, thesis 6.42) and `poincare` (eigenvalues of the
     autodiff Jacobian of the step map), sorted by modulus. `transverse=False` computes
     the Poincare multipliers (and the verdict) only, several times faster.
@@ -261,11 +262,12 @@ def gait_multipliers(model, z, config=DEFAULT_CONFIG, *, transverse=True):
     Runs as a batch of one of `family_multipliers` (same compiled program) when the
     model has a slope `psi`; otherwise, or under a JAX transformation, on its own.
     """
+    z = getattr(z, "z", z)  # a Gait: its section coordinates
     x = jax.ShapeDtypeStruct((2 * model.n_dof,), jnp.float64)
     n = jax.eval_shape(model.state_to_section, x).shape[0]  # 2n - 1 for a compass gait
     if np.shape(z)[-1:] != (n,):
         raise ValueError(
-            f"gait_multipliers: z must be the {n} section coordinates "
+            f"gait_multipliers: z must be a Gait or the {n} section coordinates "
             f"(model.state_to_section of the post-impact state), got shape {np.shape(z)}"
         )
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((model, z)))
