@@ -18,6 +18,10 @@ DESIGN_KEYS = {
     "initial",
     "optimum",
     "history",
+    "projected_gradient",
+    "stationarity",
+    "sampling_radius",
+    "result_reason",
 }
 
 
@@ -98,6 +102,8 @@ def test_design_json_png(tmp_path, capsys):
         assert set(out[key]["gradient"]) == {"mass-hip", "a"}
     assert len(out["optimum"]["x0"]) == 4 and len(out["optimum"]["multipliers"]) == 3
     assert len(out["history"]) == out["iterations"] + 1
+    steps = [h["step"] for h in out["history"]]
+    assert steps[0] == "start" and set(steps[1:]) <= {"adam", "gradient sampling"}
     assert out["optimum"]["value"] >= out["initial"]["value"]  # speed is maximised
     assert png.stat().st_size > 10_000
 

@@ -105,6 +105,9 @@ def test_min_norm_element_against_every_support():
     # two gradients on either side of a kink: the shortest combination runs along it
     d = min_norm_element(np.array([[1.0, 1.0], [-1.0, 1.0]]))
     assert np.allclose(d, [0.0, 1.0])
+    # a far larger gradient (next to a square-root kink) does not stop the search early
+    G = np.array([[1.0, 1.0], [-1.0, 1.0], [0.3, -1.0], [1e8, 1e8]])
+    assert np.linalg.norm(min_norm_element(G)) < 1e-9
 
 
 def test_design_spectral_radius_along_a_kink():

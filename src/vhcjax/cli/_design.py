@@ -298,6 +298,9 @@ def run_design(args):
         "units": {
             "value": "deg" if flip else ("m/s" if args.objective == "speed" else "-"),
             "gradient": "value units per parameter unit (kg, m, m/s^2)",
+            "projected_gradient": "objective (rad for flip-slope) per bound range: each "
+            "varied parameter scaled to [0, 1] within its bounds",
+            "stationarity": "as projected_gradient",
         },
     }
     if args.png:

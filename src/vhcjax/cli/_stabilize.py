@@ -312,19 +312,28 @@ def run_stabilize(args):
     # came back: a saturated torque or a start outside the basin may keep it away
     sim_out = out["simulation"]
     sim_out["recovered"] = bool(
-        int(sim.num_successful) == args.steps and err_c[-1] <= 0.1 * args.perturbation
+        int(sim.num_successful) == args.steps and err_c[-1] <= max(0.1 * args.perturbation, 1e-8)
     )
     if stable and not sim_out["recovered"]:
+        done = int(sim.num_successful)
         how = (
-            f"ended {sim_out['result']} after {int(sim.num_successful)} steps"
-            if int(sim.num_successful) < args.steps
+            f"ended {sim_out['result']} after {done} steps"
+            if done < args.steps
             else f"error {err_c[-1]:.3g} after {args.steps} steps"
         )
-        cause = (
-            f"the torque limit of {args.torque_limit:g} N m saturates the feedback"
-            if args.torque_limit is not None
-            else "the perturbation may lie outside the closed-loop basin"
-        )
+        rho = float(np.max(np.abs(np.asarray(st.closed_loop_multipliers))))
+        saturated = args.torque_limit is not None and float(
+            np.max(sim.max_abs_torque)
+        ) >= args.torque_limit * (1 - 1e-9)
+        if saturated:
+            cause = f"the torque limit of {args.torque_limit:g} N m saturates the feedback"
+        elif done == args.steps and err_c[-1] < args.perturbation:
+            cause = (
+                f"the error is still decaying (closed-loop spectral radius {rho:.3g}): "
+                "more --steps may show it recovered"
+            )
+        else:
+            cause = "the perturbation may lie outside the closed-loop basin"
         sim_out["recovered_reason"] = (
             f"stable is the local verdict (closed-loop multipliers inside the unit circle), "
             f"but the simulation from +{args.perturbation:g} was not recovered ({how}): "

@@ -108,9 +108,10 @@ class DesignResult(eqx.Module):
     - `model`: the optimal model.
     - `stationarity`, `sampling_radius`: where the design went on by gradient sampling,
       the max-norm of the shortest vector in the convex hull of the projected gradients
-      sampled within `sampling_radius` (scaled coordinates) of the optimum: a measure of
-      Clarke stationarity at a kink, where `projected_gradient` need not vanish; `None`
-      where Adam's steps reached the end.
+      sampled within `sampling_radius` (scaled coordinates) of the optimum (the smallest
+      radius where it fell below tolerance, else the last measured): Clarke
+      stationarity at a kink, where `projected_gradient` need not vanish; `None` where
+      nothing was sampled at the optimum (Adam's steps, or a last accepted step).
     """
 
     objective: str = eqx.field(static=True)
@@ -152,20 +153,24 @@ def min_norm_element(G):
     """The shortest vector in the convex hull of the rows of `G`: Wolfe's (1976) finite
     active-set method (the affine minimum-norm point of a growing corral of rows)."""
     P = np.asarray(G, float)
-    tol = 1e-12 * max(float(np.einsum("ij,ij->i", P, P).max()), 1e-300)
-    S = [int(np.argmin(np.einsum("ij,ij->i", P, P)))]
+    norms = np.einsum("ij,ij->i", P, P)
+    S = [int(np.argmin(norms))]
     lam = np.ones(1)
     x = P[S[0]]
     for _ in range(50 * len(P)):  # major cycles: add the row most opposed to x
         j = int(np.argmin(P @ x))
-        if x @ x - P[j] @ x <= tol or j in S:
+        # the duality gap relative to |x|^2 (not to the largest row: next to a
+        # square-root kink one gradient can be orders of magnitude larger than x)
+        if x @ x - P[j] @ x <= 1e-12 * (x @ x) or j in S:
             break
         S.append(j)
         lam = np.append(lam, 0.0)
         while True:  # minor cycles: move to the corral's affine minimum, dropping rows
-            r = len(S)
-            K = np.block([[P[S] @ P[S].T, np.ones((r, 1))], [np.ones((1, r)), np.zeros((1, 1))]])
-            y = np.linalg.lstsq(K, np.r_[np.zeros(r), 1.0], rcond=None)[0][:r]
+            # the affine minimum P_0 + sum_i w_i (P_i - P_0) by least squares on the
+            # differences (conditioned like the rows, not like their Gram matrix)
+            D = (P[S[1:]] - P[S[0]]).T
+            w = np.linalg.lstsq(D, -P[S[0]], rcond=None)[0]
+            y = np.r_[1.0 - w.sum(), w]
             if (y > 1e-14).all():
                 lam = y
                 break
@@ -215,14 +220,15 @@ def design(
     pair of multipliers meets the real axis and the gradient jumps), the design goes on
     by gradient sampling: `2 len(vary)` gradients at random points within a radius
     (first `learning_rate`, scaled coordinates) of the iterate, projected onto the box;
-    the shortest vector `d` in the convex hull of these, the iterate's gradient and
-    those of failed line-search points within the radius; a step along `-d` by Armijo
-    backtracking (halved until a trial lies within the radius; where none descends, once
-    more with the failed trials' gradients). Where `d` is below tolerance, or no step
-    along it descends, the radius shrinks tenfold; below 1e-5 the design stops, with
-    `"successful"` (Clarke-stationary: `d` below tolerance within some radius),
-    `"no_descent"` or `"no_gait"`. The samples come from a fixed seed: a design is
-    reproducible.
+    the shortest vector `d` in the convex hull of the iterate's gradient and those of
+    every point evaluated within the radius since the last accepted step (samples and
+    failed trial steps); a step along `-d` by Armijo backtracking, first no longer than
+    `learning_rate` and halved until a trial lies within the radius (where none
+    descends, once more with the failed trials' gradients). Where `d` is below
+    tolerance, or no step along it descends, the radius shrinks tenfold; below 1e-5 the
+    design stops, with `"successful"` (Clarke-stationary: `d` below tolerance within
+    some radius), `"no_descent"` or `"no_gait"`. The samples come from a fixed seed: a
+    design is reproducible.
 
     **Returns:** a `DesignResult`.
     """
@@ -234,6 +240,8 @@ def design(
         raise ValueError(f"steps must be a positive integer, got {steps!r}")
     if not (math.isfinite(learning_rate) and learning_rate > 0):
         raise ValueError(f"learning_rate must be finite and positive, got {learning_rate!r}")
+    if not (math.isfinite(gtol) and gtol > 0):
+        raise ValueError(f"gtol must be finite and positive, got {gtol!r}")
     if model is not None and not isinstance(model, CompassGait):
         raise ValueError(f"design works on a CompassGait, got {type(model).__name__}")
     vary = tuple(vary)
@@ -293,21 +301,22 @@ def design(
         a gait (Newton from the last iterate's gait: continuation)."""
         x_new = lo + u_new * (hi - lo)
         v_new, grad_new, gait_new = _evaluate(base, vary, x_new, objective, guess)
-        if not (bool(gait_new.result == RESULTS.successful) and np.isfinite(v_new)):
+        finite = np.isfinite(v_new) and np.isfinite(grad_new).all()
+        if not (bool(gait_new.result == RESULTS.successful) and finite):
             return None
         bundle.append((u_new, grad_new))
         return u_new, x_new, v_new, grad_new, gait_new
 
-    def line_search(path, slope, halvings):
-        """The first of `path(1), path(1/2), ...` with a gait and `sense * value` at most
-        `sense * v - slope * t` (Armijo; `slope = 0`: no worse than the last)."""
+    def line_search(path, decrease, halvings, t=1.0):
+        """The first of `path(t), path(t/2), ...` with a gait and `sense * value` at most
+        `sense * v - decrease(u_trial)` (Armijo; `None`: no worse than the last)."""
         found[0] = False
-        t = 1.0
         for _ in range(halvings + 1):
             trial = evaluate(path(t))
             if trial is not None:
                 found[0] = True
-                if sense * trial[2] <= sense * v - slope * t:
+                need = 0.0 if decrease is None else decrease(trial[0])
+                if sense * trial[2] <= sense * v - need:
                     return trial
             t *= 0.5
         return None
@@ -318,7 +327,7 @@ def design(
     u = (x - lo) / (hi - lo)
     state = opt.init(jnp.asarray(u))
     result, k, sampling = "max_iterations", 0, False
-    radius, stationarity, certified, retried = learning_rate, None, None, False
+    radius, measured, certified, retried = learning_rate, None, None, False
     rng = np.random.default_rng(0)
     pg = projected_gradient(u, grad * (hi - lo), sense)
     while k < steps:
@@ -330,7 +339,7 @@ def design(
             # finds a gait no worse than the last
             upd, state = opt.update(jnp.asarray(sense * grad * (hi - lo)), state)
             u_new = np.clip(u + np.asarray(upd), 0.0, 1.0)
-            step = line_search(lambda t: u + t * (u_new - u), 0.0, _HALVINGS)
+            step = line_search(lambda t: u + t * (u_new - u), None, _HALVINGS)
             if step is None:  # a kink (or momentum uphill): gradient sampling from here on
                 sampling = True
                 continue
@@ -347,16 +356,25 @@ def design(
             grads = [grad] + [g for w, g in bundle if np.linalg.norm(w - u) <= radius]
             held = projected_gradient(u, grad * (hi - lo), sense) != sense * grad * (hi - lo)
             d = min_norm_element(np.where(held, 0.0, sense * np.array(grads) * (hi - lo)))
-            stationarity = float(np.abs(d).max())
+            measured = (radius, float(np.abs(d).max()))
             step = None
-            if stationarity < gtol * scale:  # stationary within this radius
-                certified = (radius, stationarity)
+            if measured[1] < gtol * scale:  # stationary within this radius
+                certified = measured
             else:
-                # halved until a trial lies within the radius: a failed search leaves
-                # gradients there for the next round
-                n = max(_SAMPLED_HALVINGS, math.ceil(math.log2(np.linalg.norm(d) / radius)) + 1)
+                # first a step no longer than Adam's rate (Newton from the last gait must
+                # stay on its branch), halved until a trial lies within the radius: a
+                # failed search leaves gradients there for the next round; the decrease
+                # asked for is the one of the clipped (actual) step
+                t0 = min(1.0, learning_rate / float(np.linalg.norm(d)))
+                n = max(
+                    _SAMPLED_HALVINGS,
+                    math.ceil(math.log2(t0 * float(np.linalg.norm(d)) / radius)) + 1,
+                )
                 step = line_search(
-                    lambda t: np.clip(u - t * d, 0.0, 1.0), _ARMIJO * float(d @ d), n
+                    lambda t: np.clip(u - t * d, 0.0, 1.0),
+                    lambda w: _ARMIJO * float(d @ (u - w)),
+                    n,
+                    t0,
                 )
                 if step is None and not retried:  # again, with the failed trials' gradients
                     retried = True
@@ -368,7 +386,7 @@ def design(
                     result = "successful" if certified else "no_descent"
                     break
                 continue
-            certified, retried = None, False
+            certified, measured, retried = None, None, False
         k += 1
         u, x, v, grad, gait = step
         bundle.clear()
@@ -403,8 +421,8 @@ def design(
         float(np.abs(pg).max()),
         history,
         best,
-        certified[1] if certified else stationarity,
-        certified[0] if certified else (radius if sampling else None),
+        (certified or measured or (None, None))[1],
+        (certified or measured or (None, None))[0],
     )
 
 

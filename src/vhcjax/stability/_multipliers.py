@@ -254,7 +254,8 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, transverse=Tru
 
 def gait_multipliers(model, z, config=DEFAULT_CONFIG, *, transverse=True):
     """Both multiplier computations at the period-1 gait with section coordinates `z`
-    (or at a `Gait`, as `find_gait` returns it):
+    (or at a `Gait`, as `find_gait` returns it; a point that is not a gait, such as a
+    failed search's, is coded `not_a_gait`):
     `transverse` (eigenvalues of Xi, thesis 6.42) and `poincare` (eigenvalues of the
     autodiff Jacobian of the step map), sorted by modulus. `transverse=False` computes
     the Poincare multipliers (and the verdict) only, several times faster.
