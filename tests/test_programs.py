@@ -170,3 +170,25 @@ def test_outputs_keep_their_types(store):
     assert type(out) is type(plain)
     assert jax.tree_util.tree_structure(out) == jax.tree_util.tree_structure(plain)
     assert eqx.tree_equal(out, plain, rtol=0, atol=1e-14)
+
+
+def test_a_call_inside_another_program_becomes_part_of_it(store, monkeypatch):
+    """Constant arguments inside `jax.jit`: no stored program, no program of its own
+    (whose compiler options `jax.jit` would refuse), the same numbers."""
+    counts = _counts(monkeypatch)
+    model, z = vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774])
+    inside = jax.jit(lambda: vj.hybrid.step_map_jit(model, z).z_next)()
+    assert counts == {"exported": 0, "loaded": 0, "unexportable": 0}
+    alone = vj.hybrid.step_map_jit(model, z).z_next
+    assert counts["exported"] == 1
+    np.testing.assert_allclose(inside, alone, rtol=0, atol=1e-13)
+
+
+def test_programs_compile_with_the_cpu_options():
+    """On the CPU every top-level program gets `xla_cpu_use_fusion_emitters=False` (this
+    XLA knows the option); a program compiled with it gives the same numbers."""
+    assert jax.default_backend() == "cpu"
+    assert _programs.compiler_options() == {"xla_cpu_use_fusion_emitters": False}
+    model, z = vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774])
+    default = jax.jit(lambda z: vj.hybrid.step_map(model, z).z_next)(z)
+    np.testing.assert_allclose(vj.hybrid.step_map_jit.plain(model, z).z_next, default, atol=1e-13)
