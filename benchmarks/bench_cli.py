@@ -14,8 +14,12 @@ the same jobs in the same run.
 - A fresh Python process: `find_gait` and `gait_multipliers` (both multiplier methods) at
   3 degrees, warm cache (its second run).
 - The other commands at the sizes users run, second runs.
+- `--compiler-options`: only the first runs (`gait --json`, and `sweep` at N1 slopes),
+  each with an empty cache, with vhcjax's XLA options on the CPU
+  (`vhcjax._programs.compiler_options()`) and with XLA's defaults, alternating, the
+  median of `--repeats` runs each.
 
-    python benchmarks/bench_cli.py [--quick] [--json OUT]
+    python benchmarks/bench_cli.py [--quick] [--json OUT] [--compiler-options [--repeats R]]
 """
 
 import argparse
@@ -23,6 +27,7 @@ import json
 import os
 import platform
 import shutil
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -93,6 +98,13 @@ print(mult.poincare, time.perf_counter() - t0)
 """
 
 
+#: `python -m vhcjax` with XLA's default compiler options (none of vhcjax's own).
+XLA_DEFAULTS_CLI = (
+    "import sys, vhcjax._programs as p; p._CPU_OPTIONS.clear(); "
+    "from vhcjax.cli import main; sys.exit(main())"
+)
+
+
 def _timed(cmd, env, cwd):
     t0 = time.perf_counter()
     out = subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True, check=False)
@@ -108,12 +120,22 @@ def main(argv=None):
         "--quick", action="store_true", help="small sweeps (a check, not a measurement)"
     )
     ap.add_argument("--json", metavar="OUT")
+    ap.add_argument(
+        "--compiler-options",
+        action="store_true",
+        help="only first runs, with vhcjax's XLA options and with XLA's defaults",
+    )
+    ap.add_argument("--repeats", type=int, default=3, help="runs of each (--compiler-options)")
     args = ap.parse_args(argv)
     n1, n2 = (100, 400) if args.quick else (1000, 10000)
     n_scipy = 10 if args.quick else 50
     vhcjax = [sys.executable, "-m", "vhcjax"]
     work = tempfile.mkdtemp(prefix="vhcjax-bench-cli-")
     env = dict(os.environ, VHCJAX_CACHE_DIR=os.path.join(work, "cache"))
+    if args.compiler_options:
+        rows = compare_compiler_options(work, n1, args.repeats)
+        _finish(work, args, rows)
+        return
     rows = {}
 
     # gait + multipliers: first run (empty cache), second run; scipy script
@@ -231,6 +253,43 @@ def main(argv=None):
         rows["commands"][name] = t
         print(f"{' '.join(cmd)}: second run {t if t is None else round(t, 1)} s", flush=True)
 
+    _finish(work, args, rows)
+
+
+def compare_compiler_options(work, n1, repeats):
+    """First runs (empty caches) with vhcjax's XLA options and with XLA's defaults,
+    alternating; the median wall time of each and their ratio."""
+    step = (4.3 - 0.5) / (n1 - 1)
+    jobs = {
+        "gait": ["gait", "--slope-deg", "3", "--json", "--quiet"],
+        "sweep": ["sweep", "--slope-deg", f"0.5:4.3:{step!r}", "--family", "stable"]
+        + ["--csv", os.path.join(work, "sweep.csv"), "--quiet"],
+    }
+    runners = {
+        "vhcjax_options": [sys.executable, "-m", "vhcjax"],
+        "xla_defaults": [sys.executable, "-c", XLA_DEFAULTS_CLI],
+    }
+    times = {job: {name: [] for name in runners} for job in jobs}
+    for i in range(repeats):
+        for job, cmd in jobs.items():
+            for name, runner in runners.items():
+                cache = os.path.join(work, f"cache-{job}-{name}-{i}")
+                t, _ = _timed(runner + cmd, dict(os.environ, VHCJAX_CACHE_DIR=cache), work)
+                times[job][name].append(t)
+    rows = {}
+    for job, t in times.items():
+        ours, xla = (statistics.median(t[k]) for k in runners)
+        rows[job] = dict(vhcjax_options_s=t["vhcjax_options"], xla_defaults_s=t["xla_defaults"])
+        rows[job]["ratio"] = xla / ours
+        print(
+            f"{job}, first run: vhcjax options {ours:.1f} s, XLA defaults {xla:.1f} s "
+            f"(medians of {repeats}): {xla / ours:.2f}x",
+            flush=True,
+        )
+    return {"compiler_options": rows}
+
+
+def _finish(work, args, rows):
     info = dict(python=platform.python_version(), cpus=os.cpu_count(), quick=args.quick)
     shutil.rmtree(work, ignore_errors=True)
     if args.json:
