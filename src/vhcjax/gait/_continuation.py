@@ -62,9 +62,9 @@ def _continue(start, end, s_buf, n, z0, sign, method, s_prev=None, z_prev=None):
     with a secant predictor: the line through the last two points solved, the first of
     them `(s_prev, z_prev)` if given (the first step from the seed alone starts at the
     seed). A failed point does not move the line: the next one is predicted from the last
-    two successes. The entries from `n` on solve the last point solved again, from its
-    solution (converged at once): the search is traced once, with no separate pass for
-    the shape of its output.
+    two successes. The entries from `n` on solve the last point solved (or the seed) again,
+    from where it stands, which takes a few evaluations: so the search is traced once,
+    with no separate pass for the shape of its output.
 
     **Returns:** a batched `Gait` (one per buffer entry).
     """
