@@ -127,6 +127,8 @@ def main(argv=None):
     )
     ap.add_argument("--repeats", type=int, default=3, help="runs of each (--compiler-options)")
     args = ap.parse_args(argv)
+    if args.repeats < 1:
+        ap.error("--repeats must be at least 1")
     n1, n2 = (100, 400) if args.quick else (1000, 10000)
     n_scipy = 10 if args.quick else 50
     vhcjax = [sys.executable, "-m", "vhcjax"]
@@ -272,21 +274,27 @@ def compare_compiler_options(work, n1, repeats):
     times = {job: {name: [] for name in runners} for job in jobs}
     for i in range(repeats):
         for job, cmd in jobs.items():
-            for name, runner in runners.items():
+            order = list(runners.items())
+            for name, runner in order if i % 2 == 0 else order[::-1]:  # either first in turn
                 cache = os.path.join(work, f"cache-{job}-{name}-{i}")
                 t, _ = _timed(runner + cmd, dict(os.environ, VHCJAX_CACHE_DIR=cache), work)
                 times[job][name].append(t)
     rows = {}
     for job, t in times.items():
         ours, xla = (statistics.median(t[k]) for k in runners)
-        rows[job] = dict(vhcjax_options_s=t["vhcjax_options"], xla_defaults_s=t["xla_defaults"])
-        rows[job]["ratio"] = xla / ours
+        rows[job] = dict(
+            vhcjax_options_s=t["vhcjax_options"],
+            xla_defaults_s=t["xla_defaults"],
+            vhcjax_options_median_s=ours,
+            xla_defaults_median_s=xla,
+            ratio=xla / ours,
+        )
         print(
             f"{job}, first run: vhcjax options {ours:.1f} s, XLA defaults {xla:.1f} s "
             f"(medians of {repeats}): {xla / ours:.2f}x",
             flush=True,
         )
-    return {"compiler_options": rows}
+    return {"compiler_options": dict(repeats=repeats, **rows)}
 
 
 def _finish(work, args, rows):

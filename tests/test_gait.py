@@ -481,17 +481,18 @@ def test_converged_gaits_close_well_inside_the_success_test(fam, deg):
     assert float(g.residual) < G.SUCCESS_TOL / 10
 
 
-def test_continuation_in_calls_equals_the_searches_and_pads_with_the_last_point():
+def test_continuation_in_calls_equals_the_searches_and_runs_only_its_points():
     """`_run_continuation` runs the compiled continuation in calls of `_CHUNK` points (here
     a full call and a short one): every point equals a search from an independent guess,
-    and the entries of a short call past its length solve its last point again."""
+    and a short call solves only its own points (the rest of its buffer stays unset)."""
     from vhcjax.gait import _continuation as C
 
     ref = G.reference_model()
     end = _problem1._with_psi(ref, math.radians(3.6))
     s = np.linspace(0.0, 1.0, C._CHUNK + 4)
-    z0 = C._seed(-1.0, "vhc")
-    g = C._run_continuation(ref, end, s, z0, -1.0, "vhc")
+    sign = G.family_sign("stable")  # as the library passes it (an array)
+    z0 = C._seed(sign, "vhc")
+    g = C._run_continuation(ref, end, s, z0, sign, "vhc")
     assert (np.asarray(g.result._value) == vj.RESULTS.successful._value).all()
     path = C._path(ref, end)
     for i in (0, C._CHUNK - 1, C._CHUNK, len(s) - 1):
@@ -501,7 +502,16 @@ def test_continuation_in_calls_equals_the_searches_and_pads_with_the_last_point(
     k = 3
     s_buf = np.concatenate([s[:k], np.full(C._CHUNK - k, s[k - 1])])
     z0 = np.asarray(z0, float)  # the arguments as `_run_continuation` gives them
-    out = C._continue_jit(ref, end, s_buf, np.asarray(k), z0, -1.0, "vhc", np.asarray(s[0]), z0)
+    out = C._continue_jit(ref, end, s_buf, np.asarray(k), z0, sign, "vhc", np.asarray(s[0]), z0)
     np.testing.assert_allclose(np.asarray(out.a[:k]), g.a[:k], rtol=0, atol=1e-12)
-    np.testing.assert_allclose(np.asarray(out.a[k:]), float(out.a[k - 1]), rtol=0, atol=1e-12)
-    assert (np.asarray(out.result._value) == vj.RESULTS.successful._value).all()
+    assert np.all(np.asarray(out.a[k:]) == 0.0) and np.all(np.asarray(out.iterations[k:]) == 0)
+
+
+def test_batch_without_guesses_continues_each_member():
+    """`find_gaits` without guesses continues every member from the reference gait (the
+    continuation under `vmap`); each equals a search from the thesis seed."""
+    psi = np.radians([2.5, 3.5])
+    gs = G.find_gaits(vj.CompassGait(), psi=psi)
+    for i, p in enumerate(psi):
+        g = G.find_gait(vj.CompassGait(psi=float(p)), guess=SEED)
+        np.testing.assert_allclose([gs.a[i], gs.b[i]], [g.a, g.b], rtol=0, atol=1e-10)

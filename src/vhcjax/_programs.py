@@ -64,9 +64,10 @@ stats = {"exported": 0, "loaded": 0, "unexportable": 0}
 
 
 #: XLA options of the programs on the CPU: XLA's older fusion code generator compiles
-#: these programs (ODE solves in Newton loops) about 1.4x faster than the default one and
-#: runs them as fast (`benchmarks/bench_cli.py --compiler-options`; see "A persistent
-#: compilation cache" in `docs/design.md`). The benchmark clears this dict to compare.
+#: these programs (ODE solves in Newton loops) faster than the default one and runs them
+#: as fast; `benchmarks/bench_cli.py --compiler-options` times first runs of commands
+#: with and without it (it clears this dict), and "A persistent compilation cache" in
+#: `docs/design.md` says more.
 _CPU_OPTIONS = {"xla_cpu_use_fusion_emitters": False}
 _options = None
 

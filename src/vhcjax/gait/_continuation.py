@@ -58,42 +58,46 @@ def _path(start, end):
 
 def _continue(start, end, s_buf, n, z0, sign, method, s_prev=None, z_prev=None):
     """Follow the solution of the model `_path(start, end)(s)` through `s_buf[:n]`
-    (a `scan` over a fixed-size buffer, `n` traced), from the seed `z0` at `s_buf[0]`,
-    with a secant predictor: the line through the last two points solved, the first of
-    them `(s_prev, z_prev)` if given (the first step from the seed alone starts at the
-    seed). A failed point does not move the line: the next one is predicted from the last
-    two successes. The entries from `n` on solve the last point solved (or the seed) again,
-    from where it stands, which takes a few evaluations: so the search is traced once,
-    with no separate pass for the shape of its output.
+    (a `fori_loop` with a dynamic length over a fixed-size buffer), from the seed `z0` at
+    `s_buf[0]`, with a secant predictor: the line through the last two points solved,
+    the first of them `(s_prev, z_prev)` if given (the first step from the seed alone
+    starts at the seed). A failed point does not move the line: the next one is
+    predicted from the last two successes.
 
-    **Returns:** a batched `Gait` (one per buffer entry).
+    The search is traced once, into a jaxpr (`jax.closure_convert`): the buffer's shapes
+    come from it and the loop replays it (tracing it again for the shapes alone would
+    cost as much as the first time).
+
+    **Returns:** a batched `Gait` (one per buffer entry; entries from `n` on are unset).
     """
     path = _path(start, end)
     s0 = s_buf[0]
+    search, consts = jax.closure_convert(lambda s, z: _search(path(s), z, sign, method), s0, z0)
+    shape = jax.eval_shape(search, s0, z0, *consts)
+    buf = jax.tree_util.tree_map(lambda l: jnp.zeros((s_buf.shape[0],) + l.shape, l.dtype), shape)
 
-    def body(carry, xs):
-        s_prev, z_prev, s_good, z_good = carry
-        i, s = xs
-        live = i < n
+    def body(i, carry):
+        s_prev, z_prev, s_good, z_good, buf = carry
+        s = s_buf[i]
         slope = jnp.where(s_good != s_prev, (z_good - z_prev) / (s_good - s_prev), 0.0)
-        s = jnp.where(live, s, s_good)
-        gait = _search(path(s), z_good + slope * (s - s_good), sign, method)
-        ok = live & (gait.result == RESULTS.successful)
+        gait = search(s, z_good + slope * (s - s_good), *consts)
+        ok = gait.result == RESULTS.successful
         z_new = _unknowns(gait, method)
+        buf = jax.tree_util.tree_map(lambda b, v: b.at[i].set(v), buf, gait)
         # a point equal to the last success (the seed re-solved) keeps the older one
         move = ok & (s != s_good)
-        carry = (
+        return (
             jnp.where(move, s_good, s_prev),
             jnp.where(move, z_good, z_prev),
             jnp.where(ok, s, s_good),
             jnp.where(ok, z_new, z_good),
+            buf,
         )
-        return carry, gait
 
     if s_prev is None:
         s_prev, z_prev = s0, z0
-    init = (jnp.asarray(s_prev, s0.dtype), jnp.asarray(z_prev, z0.dtype), s0, z0)
-    return jax.lax.scan(body, init, (jnp.arange(s_buf.shape[0]), s_buf))[1]
+    init = (jnp.asarray(s_prev, s0.dtype), jnp.asarray(z_prev, z0.dtype), s0, z0, buf)
+    return jax.lax.fori_loop(0, n, body, init)[-1]
 
 
 _continue_jit = stored_jit(_continue)
