@@ -280,6 +280,22 @@ def test_multipliers_only_of_a_gait_of_a_valid_model(gaits3):
     )
 
 
+def test_one_gait_multipliers_equal_the_batched_family_member(gaits3):
+    """`gait_multipliers` (one unbatched program) and `family_multipliers` (vmapped over
+    a batch) are two compilations of the same computation: equal to rounding, numpy
+    leaves on concrete inputs; a batch of points is refused with the shape expected."""
+    m, g = gaits3
+    zs = np.stack([g["stable"][0], g["unstable"][0]])
+    batch = S.family_multipliers(m, np.full(2, PSI3), zs, transverse=False)
+    for i in range(2):
+        one = vhcjax.gait_multipliers(m, zs[i], transverse=False)
+        assert isinstance(one.poincare, np.ndarray)
+        np.testing.assert_allclose(one.poincare, batch.poincare[i], rtol=1e-12, atol=1e-14)
+        assert bool(one.stable) == bool(batch.stable[i]) == (i == 0)
+    with pytest.raises(ValueError, match="3 section coordinates.*got shape \\(2, 3\\)"):
+        vhcjax.gait_multipliers(m, zs)
+
+
 def test_library_inputs_refused_with_the_shape_or_range_expected():
     m = CompassGait()
     for guess in ([0.2, -1.0, 0.1, 0.2, 0.3], [0.2]):

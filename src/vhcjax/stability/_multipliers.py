@@ -260,28 +260,21 @@ def gait_multipliers(model, z, config=DEFAULT_CONFIG, *, transverse=True):
     autodiff Jacobian of the step map), sorted by modulus. `transverse=False` computes
     the Poincare multipliers (and the verdict) only, several times faster.
 
-    Runs as a batch of one of `family_multipliers` (same compiled program) when the
-    model has a slope `psi`; otherwise, or under a JAX transformation, on its own.
+    One compiled program, unbatched, serves every gait of a model class (its parameters
+    are array leaves); `family_multipliers` batches many gaits. Concrete inputs give
+    numpy leaves; under a JAX transformation, traced ones.
     """
     z = getattr(z, "z", z)  # a Gait: its section coordinates
     x = jax.ShapeDtypeStruct((2 * model.n_dof,), jnp.float64)
     n = jax.eval_shape(model.state_to_section, x).shape[0]  # 2n - 1 for a compass gait
-    if np.shape(z)[-1:] != (n,):
+    if np.shape(z) != (n,):
         raise ValueError(
             f"gait_multipliers: z must be a Gait or the {n} section coordinates "
             f"(model.state_to_section of the post-impact state), got shape {np.shape(z)}"
         )
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((model, z)))
-    if traced or not hasattr(model, "psi"):
-        return _gait_multipliers_jit(model, z, config, transverse)
-    out = family_multipliers(
-        model,
-        np.asarray(model.psi)[None],
-        np.asarray(z, float)[None],
-        config,
-        transverse=transverse,
-    )
-    return jax.tree_util.tree_map(lambda x: x[0], out)
+    out = _gait_multipliers_jit(model, jnp.asarray(z, float), config, transverse)
+    return out if traced else jax.device_get(out)
 
 
 _gait_multipliers_jit = stored_jit(_gait_multipliers)
