@@ -177,3 +177,19 @@ def test_atlas_against_bifurcation_and_scaling(monkeypatch):
     scaled = vj.atlas(mu, beta, slope=math.radians(3.0), mass_leg=2.0, leg_length=1.7, gravity=3.7)
     np.testing.assert_allclose(np.degrees(scaled.flip_slope), np.degrees(at.flip_slope), atol=1e-6)
     np.testing.assert_allclose(scaled.spectral_radius, at.spectral_radius, atol=1e-8)
+
+
+def test_atlas_reports_no_flip_for_a_gait_already_past_one():
+    """mu = 2, beta = 0.05: at the scan start (1 deg) the gait continued from Table 1
+    already has a real multiplier below -1, so no flip lies ahead; the atlas says so
+    instead of bracketing a sign change that is not there."""
+    at = vj.atlas([2.0], [0.05])
+    assert np.isnan(at.flip_slope[0, 0]) and np.isnan(at.stable_range[0, 0]).all()
+    assert "multiplier below -1" in at.reason[0] and "past a flip" in at.reason[0]
+    # independently: the stable-family gait there, by shooting, and its Poincare multipliers
+    from vhcjax.parameters._atlas import grid_model
+
+    m = grid_model(2.0, 0.05, psi=math.radians(1.0))
+    g = vj.find_gait(m, "stable", "shooting")
+    ev = np.asarray(vj.gait_multipliers(m, g, transverse=False).poincare)
+    assert ev.real.min() < -1 and abs(ev.imag).max() < 1e-12

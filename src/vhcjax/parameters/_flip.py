@@ -183,7 +183,16 @@ def flip_slopes(
         zs, ok, F, rho = _evaluate(model, np.full(B, psi), z, todo)
         stable = ok & (rho < 1)
         lo = np.where(todo & stable & np.isnan(lo), psi, lo)
-        cross = todo & ok & (F < 0) & np.isfinite(fa)
+        # det(I + J) < 0 already at the start: a real multiplier below -1, no flip ahead
+        past = todo & ok & (F < 0) & np.isnan(fa)
+        for i in np.nonzero(past)[0]:
+            reason[i] = (
+                f"the gait at the start of the scan ({math.degrees(psi):.3f} deg) already has "
+                "a multiplier below -1 (det(I + J) < 0): past a flip"
+            )
+        alive &= ~past
+        todo &= ~past
+        cross = todo & ok & (F < 0) & (fa > 0)
         # the first sign change of F: bracket [previous slope, this slope]
         b = np.where(cross, psi, b)
         fb = np.where(cross, F, fb)
