@@ -75,6 +75,23 @@ def test_max_push_brackets():
     assert res.largest.shape == (2, 2)
 
 
+def test_a_pulse_past_the_heel_strike_is_refused(capsys):
+    """A pulse still acting at the gait's heel strike cannot be simulated (`pulse_step`
+    integrates it without the impact): the library raises, the command exits 2 with one
+    line, before any bisection; a pulse that ends in time is accepted."""
+    from vhcjax.cli import main
+
+    model, _, x_star, period = stable_gait()
+    with pytest.raises(ValueError, match="after the heel strike"):
+        vj.max_push(model, x_star, period, np.array([0.0, 0.5]), np.zeros(1), duration=0.5)
+    assert vj.pulse_past_strike(np.array([0.0, 0.5]), period, 0.3) == ""
+    assert vj.pulse_past_strike(np.array([0.0]), period, period) != ""
+    argv = ["push", "--phases", "2", "--directions-deg", "0", "--duration", "0.5"]
+    assert main(argv + ["--quiet"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "after the heel strike" in err and "\n" not in err
+
+
 def test_cli_says_when_the_step_budget_decides_the_largest_push(capsys):
     from vhcjax.cli import main
 

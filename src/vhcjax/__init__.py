@@ -138,6 +138,7 @@ from .robustness import (
     max_converging_perturbation as max_converging_perturbation,
     max_floor_step as max_floor_step,
     max_push as max_push,
+    pulse_past_strike as pulse_past_strike,
     pulse_step as pulse_step,
     push_sensitivity_autodiff as push_sensitivity_autodiff,
     push_sensitivity_transverse as push_sensitivity_transverse,

@@ -486,6 +486,7 @@ def run_push(args):
     from ..robustness import (
         UNDECIDED,
         max_push,
+        pulse_past_strike,
         push_sensitivity_autodiff,
         push_sensitivity_transverse,
     )
@@ -499,6 +500,9 @@ def run_push(args):
         )
     model, z, x_star, period, zn = _gait(args)
     phases = np.arange(args.phases) / args.phases
+    late = pulse_past_strike(phases, period, args.duration)
+    if late:
+        raise CLIError(f"--duration: {late}")
     angles = np.radians(np.asarray(args.directions_deg, float))
     D = push_sensitivity_autodiff(model, x_star, period, jnp.asarray(phases))
     out = {"gait": zn, "period": period, "phases": phases, "sensitivity_dxplus_dP": D}
@@ -569,9 +573,13 @@ def run_push(args):
     else:
         for j, a in enumerate(args.directions_deg):
             col = res.largest[:, j]
+            col = col[np.isfinite(col)]
+            if col.size == 0:
+                print(f"direction {a:g} deg: no push survived at any phase, not even 0 {unit}")
+                continue
             print(
-                f"direction {a:g} deg: largest push survived {np.nanmin(col):.4g}-"
-                f"{np.nanmax(col):.4g} {unit}; most fragile at phase "
+                f"direction {a:g} deg: largest push survived {col.min():.4g}-"
+                f"{col.max():.4g} {unit}; most fragile at phase "
                 f"{res.most_fragile_phase[j]:.2f}"
             )
         if args.check:

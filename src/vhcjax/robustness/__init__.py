@@ -31,6 +31,7 @@ from ._push import (
     impulse_step as impulse_step,
     impulse_velocity_jump as impulse_velocity_jump,
     max_push as max_push,
+    pulse_past_strike as pulse_past_strike,
     pulse_step as pulse_step,
     push_recovery as push_recovery,
     push_sensitivity_autodiff as push_sensitivity_autodiff,

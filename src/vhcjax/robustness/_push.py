@@ -251,6 +251,26 @@ def push_recovery(
     return recover(model, x0, x_star, num_steps, tol=tol, config=config, first_step=first)
 
 
+def pulse_past_strike(phases, period, duration):
+    """Why a pulse of `duration` (s) from some phase of a step of `period` (s) cannot be
+    simulated (it would still act at the heel strike: `pulse_step` integrates the pulse
+    as its own segment, without the impact), or `""` where every pulse ends within the
+    step."""
+    phases = np.asarray(phases, dtype=float).reshape(-1)
+    period = float(period)
+    if duration <= 0 or phases.size == 0:
+        return ""
+    last = float(phases.max())
+    if last * period + duration < period:
+        return ""
+    return (
+        f"a pulse of {duration:g} s from phase {last:g} ends at "
+        f"{last * period + duration:.4g} s, after the heel strike of the gait "
+        f"(step period {period:.4g} s): each pulse must end within its step "
+        "(phase + duration / period < 1)"
+    )
+
+
 class PushThresholds(eqx.Module):
     """Largest push survived (returns to the gait), per phase and direction.
 
@@ -258,7 +278,8 @@ class PushThresholds(eqx.Module):
     - `threshold`: a `vhcjax.Threshold`, arrays of shape `(len(phases), len(angles))`
       flattened row-major: `lo` survives, `hi` does not.
     - `largest`: `lo` reshaped to `(len(phases), len(angles))`.
-    - `most_fragile_phase`: per direction, the phase with the smallest `largest`.
+    - `most_fragile_phase`: per direction, the phase with the smallest `largest` (NaN
+      where no push survived at any phase).
     - `duration`: 0 for impulses (N s), else the pulse duration (s) (forces in N).
     """
 
@@ -293,6 +314,9 @@ def max_push(
     """
     phases = np.asarray(phases, dtype=float)
     angles = np.asarray(angles, dtype=float)
+    late = pulse_past_strike(phases, period, duration)
+    if late:
+        raise ValueError(f"max_push: {late}")
     S, A = np.meshgrid(phases, angles, indexing="ij")
     s_flat, a_flat = jnp.asarray(S.ravel()), jnp.asarray(A.ravel())
 
@@ -310,5 +334,10 @@ def max_push(
         progress=progress,
     )
     largest = th.lo.reshape(S.shape)
-    fragile = phases[np.nanargmin(np.where(np.isfinite(largest), largest, np.inf), axis=0)]
+    # per direction; NaN where no phase has a finite largest push (none survived)
+    fragile = np.where(
+        np.isfinite(largest).any(axis=0),
+        phases[np.argmin(np.where(np.isfinite(largest), largest, np.inf), axis=0)],
+        np.nan,
+    )
     return PushThresholds(phases, angles, th, largest, fragile, float(duration))
