@@ -118,7 +118,8 @@ def _evaluate(model, psi, zs, mask, solver="newton"):
 class FlipScan(eqx.Module):
     """Result of `flip_slopes` (numpy, one entry per model of the batch).
 
-    - `psi`: the flip slope (rad), NaN where none was found in the scanned range.
+    - `psi`: the flip slope (rad), NaN where none was found in the scanned range (or
+      the gait at the start already has a multiplier below -1: past a flip).
     - `z`: the period-1 gait there (section point).
     - `stable_range`: `(B, 2)`, the lowest and highest slope (rad) of the scan where the
       period-1 gait was found and stable (the upper end refined to the flip slope, or to
@@ -184,7 +185,7 @@ def flip_slopes(
         stable = ok & (rho < 1)
         lo = np.where(todo & stable & np.isnan(lo), psi, lo)
         # det(I + J) < 0 already at the start: a real multiplier below -1, no flip ahead
-        past = todo & ok & (F < 0) & np.isnan(fa)
+        past = todo & ok & (F < 0) & np.isnan(a)  # no slope kept yet: the first one
         for i in np.nonzero(past)[0]:
             reason[i] = (
                 f"the gait at the start of the scan ({math.degrees(psi):.3f} deg) already has "
@@ -266,7 +267,8 @@ def flip_slope(model, z_start, *, psi_max=math.radians(12.0), step=math.radians(
     gait `z_start` (section point) at `model.psi`; differentiable with respect to the
     model parameters (`jax.grad`, `jax.jvp`, ...) by the implicit function theorem on
     $\\det(I + J) = 0$. Locating it runs on the host (not under `jit`). NaN where no flip
-    was found below `psi_max`."""
+    was found below `psi_max`, or where the gait at `model.psi` is already past one
+    (`flip_slopes` says why)."""
     params = model
     m = detach(model)
     scan = flip_slopes(

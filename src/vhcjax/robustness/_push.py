@@ -255,7 +255,8 @@ def pulse_past_strike(phases, period, duration):
     """Why a pulse of `duration` (s) from some phase of a step of `period` (s) cannot be
     simulated (it would still act at the heel strike: `pulse_step` integrates the pulse
     as its own segment, without the impact), or `""` where every pulse ends within the
-    step."""
+    step. Checked against the unpushed gait's strike: a push that brings the strike
+    earlier is not caught here."""
     phases = np.asarray(phases, dtype=float).reshape(-1)
     period = float(period)
     if duration <= 0 or phases.size == 0:
@@ -266,8 +267,8 @@ def pulse_past_strike(phases, period, duration):
     return (
         f"a pulse of {duration:g} s from phase {last:g} ends at "
         f"{last * period + duration:.4g} s, after the heel strike of the gait "
-        f"(step period {period:.4g} s): each pulse must end within its step "
-        "(phase + duration / period < 1)"
+        f"(step period {period:.4g} s): each pulse must end within its step, here "
+        f"shorter than {(1.0 - last) * period:.4g} s"
     )
 
 
@@ -309,6 +310,8 @@ def max_push(
 ):
     """Largest impulse (or pulse force) at each phase and direction after which the walker
     returns to the gait within `num_steps`, by batched bisection on `[0, p_max]`.
+    A `ValueError` where a pulse (`duration > 0`) would still act at the gait's heel
+    strike (`pulse_past_strike`).
 
     **Returns:** `PushThresholds`.
     """

@@ -273,6 +273,8 @@ def gait_multipliers(model, z, config=DEFAULT_CONFIG, *, transverse=True):
             f"(model.state_to_section of the post-impact state), got shape {np.shape(z)}"
         )
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((model, z)))
+    if hasattr(model, "psi"):  # an array leaf, also when set by hand (no compile per slope)
+        model = with_slope(model, model.psi)
     out = _gait_multipliers_jit(model, jnp.asarray(z, float), config, transverse)
     return out if traced else jax.device_get(out)
 
