@@ -121,6 +121,8 @@ def test_bad_numeric_value_one_line_exit_2(capsys, cmd, flag, nargs, value):
         (["stabilize", "--r", "1e-300"], "[1e-08, 1e+08]"),
         (["stabilize", "--q", "-1,1,1"], "--q must be >= 0"),
         (["push", "--phases", "10000", "--directions-deg", "0", "90"], "at most 10,000"),
+        (["gait", "--slope-deg", "1e-300"], "are not solved without --guess"),
+        (["sweep", "--slope-deg", "1:2:0.5", "--png", "/dev/null/x.png"], "is not a folder"),
         (
             ["atlas", "--mass-ratio", "2", "--length-ratio", "1", "--scan-step-deg", "1e-6"],
             "at most 2000",

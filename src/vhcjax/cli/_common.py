@@ -101,7 +101,8 @@ def check_output_file(path, flag):
     if os.path.isdir(path):
         raise CLIError(f"{flag} {path!r} is a directory")
     if not os.path.isdir(folder):
-        raise CLIError(f"{flag} {path!r}: folder {folder!r} does not exist")
+        what = "is not a folder" if os.path.exists(folder) else "does not exist"
+        raise CLIError(f"{flag} {path!r}: folder {folder!r} {what}")
     existed = os.path.exists(path)
     try:
         with open(path, "a"):

@@ -172,6 +172,8 @@ def run_gait(args):
             )
         return _run_kneed_gait(args)
     model = walker_from_args(args)
+    if args.guess is None:  # continued from 3 degrees: in steps of at most 1.5 % of the slope
+        _check_solved_slope(args.slope_deg, "without --guess")
     guess = None if args.guess is None else jnp.asarray(args.guess)
     gait = find_gait(model, args.family, args.method, guess, throw=False)
     rec = gait_json(gait, args.slope_deg)
@@ -298,16 +300,25 @@ def _nulls(row):
     return {k: (None if v == "" else v) for k, v in row.items()}
 
 
+def _check_solved_slope(slope_deg, how=""):
+    """Slopes below `vhcjax.gait.MIN_SLOPE` are not continued to (the gaits shrink to
+    nothing at zero slope): a one-line error."""
+    from ..gait import MIN_SLOPE
+
+    if slope_deg < math.degrees(MIN_SLOPE):
+        raise CLIError(
+            f"--slope-deg: slopes below {math.degrees(MIN_SLOPE):.3g} deg are not solved"
+            + (f" {how}" if how else "")
+        )
+
+
 def run_sweep(args):
-    from ..gait import MIN_SLOPE, sweep
+    from ..gait import sweep
 
     slopes = parse_range(args.slope_deg)
     for v in slopes:
         check_slope_deg(v)
-        if v < math.degrees(MIN_SLOPE):
-            raise CLIError(
-                f"--slope-deg: slopes below {math.degrees(MIN_SLOPE):.3g} deg are not solved"
-            )
+        _check_solved_slope(v)
     model = model_from_args(args, slope_deg=slopes[0])
     check_output_file(args.csv, "--csv")
     check_output_file(args.png, "--png")

@@ -150,7 +150,7 @@ def register(subparsers):
         "--chunk",
         type=count(1, 1_000_000),
         default=1024,
-        help="batch size of one call (at most 256 on a CPU with several cores)",
+        help="batch size of one call (capped at 256 on a CPU with several cores)",
     )
     p.add_argument(
         "--volume-samples",
