@@ -222,10 +222,10 @@ def test_newton_stops_a_member_that_cannot_move():
         return jnp.full_like(x, 1e3), None
 
     x0 = jnp.array([0.2, -1.0])
-    x, r, _, k = S.damped_newton(fn, x0)
+    x, r, _, k, _ = S.damped_newton(fn, x0)
     assert len(calls) == 3 and int(k) == 0
     np.testing.assert_array_equal(np.asarray(x), np.asarray(x0))
-    x, r, _, k = S.damped_newton(
+    x, r, _, k, _ = S.damped_newton(
         lambda y: (y**2 - jnp.array([2.0, 3.0]), None), jnp.array([1.4, 1.7])
     )
     np.testing.assert_allclose(np.asarray(x), np.sqrt([2.0, 3.0]), rtol=1e-12)
@@ -259,9 +259,9 @@ def test_chord_steps_keep_the_jacobian():
     fn = lambda x: (x**2 - target, None)  # noqa: E731
     x0 = jnp.array([1.4, 1.7])  # chord contraction |1 - x*/x0| < 0.02
     root = np.sqrt(np.asarray(target))
-    x_n, _, _, k_n = S.damped_newton(fn, x0, rtol=1e-14, atol=1e-14)
-    x_c, _, _, k_c = S.damped_newton(fn, x0, rtol=1e-14, atol=1e-14, chord_below=jnp.inf)
-    x_l, _, _, k_l = S.damped_newton(fn, x0, rtol=1e-14, atol=1e-14, chord_below=1e-3)
+    x_n, _, _, k_n, _ = S.damped_newton(fn, x0, rtol=1e-14, atol=1e-14)
+    x_c, _, _, k_c, _ = S.damped_newton(fn, x0, rtol=1e-14, atol=1e-14, chord_below=jnp.inf)
+    x_l, _, _, k_l, _ = S.damped_newton(fn, x0, rtol=1e-14, atol=1e-14, chord_below=1e-3)
     for x in (x_n, x_c, x_l):
         np.testing.assert_allclose(np.asarray(x), root, rtol=1e-13)
     assert int(k_c) > int(k_n) + 3
@@ -306,6 +306,26 @@ def test_batch_over_model_parameters():
     assert vj.result_names(b.result) == ["successful", "successful"]
     one = G.find_gait(vj.CompassGait(mH=12.0), "stable", guess=SEED)
     np.testing.assert_allclose(np.asarray(b.x_plus[1]), np.asarray(one.x_plus), atol=1e-10)
+
+
+def test_heavy_hip_gait_is_accepted_by_the_newton_error_estimate():
+    """With a hip 1000 times as heavy as a leg the residual of Problem 1 cannot be
+    evaluated to `SUCCESS_TOL` (rounding of a few 1e-9: the quadratic (5.13) nears a
+    double root and h divides by a small P_12), while (a, b) is known to 1e-12. The VHC
+    search accepts the gait by Newton's error estimate; shooting finds the same gait."""
+    m = vj.CompassGait(mH=5000.0, m1=5.0, m2=5.0)
+    vhc = G.find_gait(m, "stable", guess=SEED, throw=False)
+    # Shooting from the thesis seed falls; from (a, b) of the VHC gait it solves its own
+    # problem (the step map's fixed point).
+    shot = G.find_gait(m, "stable", method="shooting", guess=(vhc.a, vhc.b), throw=False)
+    assert vj.result_names(vhc.result) == vj.result_names(shot.result) == "successful"
+    np.testing.assert_allclose(np.asarray(vhc.x_plus), np.asarray(shot.x_plus), atol=1e-10)
+    np.testing.assert_allclose(np.asarray(vhc.x_minus), np.asarray(shot.x_minus), atol=1e-8)
+    # The acceptance itself: the residual alone, or a small error estimate with a small
+    # residual; never a small error estimate alone (e.g. near a pole of the residual).
+    assert bool(G.accepted(5e-10, np.inf))
+    assert bool(G.accepted(3e-9, 1e-12)) and not bool(G.accepted(3e-9, 1e-9))
+    assert not bool(G.accepted(1e-5, 1e-13))
 
 
 # One compilation each for both families (the family sign and the model are traced).
@@ -395,14 +415,14 @@ def test_inexact_newton_ends_only_at_the_final_tolerance():
         return x**2 - target + tol, tol
 
     x0 = jnp.array([1.0, 1.0])
-    x, r, tol, k = S.damped_newton(fn, x0, rtol=1e-14, atol=1e-14, tolerances=(1e-3, 1e-12))
+    x, r, tol, k, _ = S.damped_newton(fn, x0, rtol=1e-14, atol=1e-14, tolerances=(1e-3, 1e-12))
     assert float(tol) == 1e-12
     np.testing.assert_allclose(np.asarray(x), np.sqrt(np.asarray(target) - 1e-12), rtol=1e-15)
     # The loose tolerance really is used: stopped after the first evaluation, the
     # residual carries its error.
-    _, r1, tol1, _ = S.damped_newton(fn, x0, max_steps=0, tolerances=(1e-3, 1e-12))
+    _, r1, tol1, _, _ = S.damped_newton(fn, x0, max_steps=0, tolerances=(1e-3, 1e-12))
     assert float(tol1) == 1e-3
-    x_exact, _, _, _ = S.damped_newton(
+    x_exact, _, _, _, _ = S.damped_newton(
         lambda y: (y**2 - target + 1e-12, None), x0, rtol=1e-14, atol=1e-14
     )
     np.testing.assert_allclose(np.asarray(x), np.asarray(x_exact), rtol=1e-15)
@@ -428,22 +448,27 @@ def test_batched_newton_equals_newton_on_each_member():
             if kw
             else (lambda X, T: fn(X, 0.0 * X, targets))
         )
-        X, R, aux, k = S.damped_newton_batch(tol_fn, X0, rtol=1e-13, atol=1e-13, **kw)
+        X, R, aux, k, err = S.damped_newton_batch(tol_fn, X0, rtol=1e-13, atol=1e-13, **kw)
         for i in range(4):
             one = (
                 (lambda x, tol, i=i: fn(x, tol, targets[i]))
                 if kw
                 else (lambda x, i=i: fn(x, 0.0 * x, targets[i]))
             )
-            x, r, _, ki = S.damped_newton(one, X0[i], rtol=1e-13, atol=1e-13, **kw)
+            x, r, _, ki, erri = S.damped_newton(one, X0[i], rtol=1e-13, atol=1e-13, **kw)
             np.testing.assert_allclose(np.asarray(X[i]), np.asarray(x), rtol=1e-15, atol=1e-15)
             np.testing.assert_allclose(np.asarray(R[i]), np.asarray(r), rtol=1e-15, atol=1e-15)
             assert int(k[i]) == int(ki)
+            np.testing.assert_allclose(float(err[i]), float(erri), rtol=1e-12, atol=1e-300)
         assert len(set(np.asarray(k).tolist())) > 1  # the members did stop at different steps
         np.testing.assert_allclose(
             np.asarray(X)[[0, 1, 3]] ** 2, np.asarray(targets)[[0, 1, 3]], rtol=1e-11
         )
         assert np.all(np.isfinite(np.asarray(X)))
+        # Newton's error estimate |J^{-1} r|: tiny at the roots, large where there is none
+        # (row 2: x_1^2 = -1, where |J^{-1} r| = (x_1^2 + 1) / |2 x_1| >= 1).
+        err = np.asarray(err)
+        assert np.all(err[[0, 1, 3]] < 1e-12) and err[2] >= 1.0
 
 
 @pytest.mark.parametrize("fam", ["stable", "unstable"])

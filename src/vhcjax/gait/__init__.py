@@ -14,11 +14,13 @@ from ._find import (
     find_gaits as find_gaits,
 )
 from ._gait import (
+    ERROR_TOL as ERROR_TOL,
     FAMILIES as FAMILIES,
     METHODS as METHODS,
     SUCCESS_TOL as SUCCESS_TOL,
     VHC_CONFIG as VHC_CONFIG,
     Gait as Gait,
+    accepted as accepted,
     family_sign as family_sign,
 )
 from ._problem1 import (

@@ -18,18 +18,18 @@ def _evaluate_batch(evaluate, config, axes, model, X, T, family):
 def _newton_search(evaluate, config, family, finish, model, x0, axes, chord, **newton):
     """`damped_newton` on one member (`axes=None`) or `damped_newton_batch` on a batch
     (`model` batched along `axes`, `x0`: `(B, n)`) of `evaluate(model, x, family, config, tol)`;
-    `finish(model, x, r, aux, iterations) -> Gait` is written for one member."""
+    `finish(model, x, r, aux, iterations, error) -> Gait` is written for one member
+    (`error`: Newton's estimate of the error of `x`)."""
     newton["chord_below"] = _CHORD_BELOW if chord else None
     if axes is None:
 
         def member(x, tol):
             return evaluate(model, x, family, config, tol)
 
-        x, r, aux, k = damped_newton(member, x0, **newton)
-        return finish(model, x, r, aux, k)
+        return finish(model, *damped_newton(member, x0, **newton))
     fn = lambda X, T: _evaluate_batch(evaluate, config, axes, model, X, T, family)  # noqa: E731
-    X, R, aux, k = damped_newton_batch(fn, x0, **newton)
-    return eqx.filter_vmap(finish, in_axes=(axes, 0, 0, 0, 0))(model, X, R, aux, k)
+    out = damped_newton_batch(fn, x0, **newton)
+    return eqx.filter_vmap(finish, in_axes=(axes, 0, 0, 0, 0, 0))(model, *out)
 
 
 def _each_member(search, model, guess, axes, family, **kwargs):

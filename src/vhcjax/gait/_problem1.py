@@ -34,10 +34,10 @@ from ..solvers import levenberg_marquardt, optax_minimise
 from ._gait import (
     _LOOSE_TOL,
     _RESIDUAL_CAP,
-    SUCCESS_TOL,
     VHC_CONFIG,
     _label,
     _make_gait,
+    accepted,
     family_sign,
 )
 from ._newton_search import _each_member, _newton_search
@@ -289,9 +289,9 @@ def vhc_residual(model, ab, family, config=VHC_CONFIG):
     return _vhc_eval(model, ab, family, config)[0]
 
 
-def _finish_vhc(model, bd, iterations, solver_ok, family, config=VHC_CONFIG):
+def _finish_vhc(model, bd, iterations, solver_ok, family, error=jnp.inf):
     res = jnp.max(jnp.abs(bd.residual))
-    converged = solver_ok & (res < SUCCESS_TOL)
+    converged = solver_ok & accepted(res, error)
     code = RESULTS.where(
         bd.result != RESULTS.successful,
         bd.result,
@@ -376,7 +376,7 @@ def vhc_search(
     finite = jnp.isfinite(ab).all()
     ab = jnp.where(finite, ab, ab0)
     bd = vhc_boundary(model, ab, family, config)
-    return _finish_vhc(model, bd, iters, finite, family, config)
+    return _finish_vhc(model, bd, iters, finite, family)
 
 
 def _vhc_newton(
@@ -395,7 +395,7 @@ def _vhc_newton(
         _vhc_eval,
         config,
         family,
-        lambda m, ab, r, bd, k: _finish_vhc(m, bd, k, jnp.isfinite(ab).all(), family, config),
+        lambda m, ab, r, bd, k, err: _finish_vhc(m, bd, k, jnp.isfinite(ab).all(), family, err),
         model,
         ab0,
         axes,

@@ -8,7 +8,7 @@ from .. import hybrid as _poincare
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, step_unchecked
-from ._gait import _LOOSE_TOL, _RESIDUAL_CAP, SUCCESS_TOL, _label, _make_gait, family_sign
+from ._gait import _LOOSE_TOL, _RESIDUAL_CAP, _label, _make_gait, accepted, family_sign
 from ._newton_search import _each_member, _newton_search
 from ._problem1 import _impact_data, _quadratic, _with_tolerance, solve_for_d, velocity_relations
 
@@ -129,13 +129,13 @@ def _shooting_newton(
 ):
     """`shooting_search` with `solver="newton"` from section points `z0`."""
 
-    def finish(model, z, r, sr, iters):
+    def finish(model, z, r, sr, iters, error):
         res = jnp.max(jnp.abs(r))
         ok = (sr.result == RESULTS.successful) & jnp.isfinite(z).all()
         code = RESULTS.where(
             sr.result != RESULTS.successful,
             sr.result,
-            RESULTS.where(ok & (res < SUCCESS_TOL), RESULTS.successful, RESULTS.not_converged),
+            RESULTS.where(ok & accepted(res, error), RESULTS.successful, RESULTS.not_converged),
         )
         return _shooting_gait(
             model,

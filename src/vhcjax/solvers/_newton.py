@@ -61,8 +61,10 @@ def damped_newton(
     `residual_cap`), when $\|r\|_\infty < \mathrm{atol}$, when no trial decreases
     the residual, or after `max_steps` accepted steps.
 
-    **Returns:** `(x, r, aux, iterations)` at the last accepted point; `iterations`
-    counts accepted steps.
+    **Returns:** `(x, r, aux, iterations, error)` at the last accepted point;
+    `iterations` counts accepted steps, `error` is $\|J^{-1}r\|_\infty$ there (the
+    Newton estimate of the error of $x$, with the chord Jacobian after chord steps;
+    `inf` where it is not finite).
     """
     call = (lambda y, tol: fn(y)) if tolerances is None else fn
 
@@ -119,7 +121,7 @@ def damped_newton_batch(
     members with the chord finish). `tolerances` as in `damped_newton` (`None`: `tol` is
     ignored).
 
-    **Returns:** `(X, R, aux, iterations)`, each with the leading batch axis.
+    **Returns:** `(X, R, aux, iterations, error)`, each with the leading batch axis.
     """
     B, n = X0.shape
     eye = jnp.eye(n, dtype=X0.dtype)
@@ -267,8 +269,9 @@ def damped_newton_batch(
         carry = jax.lax.while_loop(
             lambda c: jnp.any(chord_iterating(c)), make_body(residual, chord_iterating), carry
         )
-    X, R, _, aux, k = carry[:5]
-    return X, R, aux, k
+    X, R, J, aux, k = carry[:5]
+    error = norm(solve(J, R))
+    return X, R, aux, k, jnp.where(jnp.isfinite(error), error, jnp.inf)
 
 
 def levenberg_marquardt(residual, x0, rtol, atol, max_steps):
