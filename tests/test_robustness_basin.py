@@ -143,3 +143,20 @@ def test_basin_slice_refuses_a_grid_it_cannot_draw():
     ):
         with pytest.raises(ValueError, match="basin_slice"):
             vj.basin_slice(vj.CompassGait(), z, **kw)
+
+
+def test_basin_refuses_a_point_that_is_not_a_gait():
+    """A slice or a volume around a point one step moves by 3e-2 would count a start
+    within `tol` of it as converged; both are refused. A grid of one point is the gait."""
+    model, z, _, _ = stable_gait()
+    off = np.asarray(z) + np.array([0.01, 0.0, 0.0])
+    with pytest.raises(ValueError, match="basin_slice: z_star is not a period-1 gait"):
+        vj.basin_slice(model, off, shape=(3, 3))
+    with pytest.raises(ValueError, match="basin_volume: z_star is not a period-1 gait"):
+        vj.basin_volume(model, off, [0.05, 0.2, 0.5], num_samples=8)
+    for kw in ({"half_widths": [0.05, 0.2]}, {"half_widths": [0.05, 0.2, 0.5], "num_samples": 0}):
+        with pytest.raises(ValueError, match="basin_volume"):
+            vj.basin_volume(model, z, **kw)
+    one = vj.basin_slice(model, z, shape=(1, 1), num_steps=5, chunk=64)
+    assert one.offsets_x.tolist() == [0.0] and one.offsets_y.tolist() == [0.0]
+    assert one.label.tolist() == [[CONVERGED]]

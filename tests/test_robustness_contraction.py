@@ -4,6 +4,7 @@ spectral radius of the autodiff Jacobian of the step map."""
 import math
 
 import numpy as np
+import pytest
 from _robust import stable_gait
 
 import vhcjax as vj
@@ -28,3 +29,28 @@ def test_measured_decay_matches_multipliers():
     assert math.isclose(float(c.steps_10x), math.log(0.1) / math.log(rho))
     # The errors really shrink 10x and 100x (measured, transients included).
     assert 0 < float(c.measured_steps_10x) < float(c.measured_steps_100x) <= 30
+
+
+def test_contraction_refuses_a_point_that_is_not_a_gait_and_a_fit_it_cannot_make():
+    """The measures linearize about a fixed point of the step map: a point one step moves
+    by 3e-2 is refused (`gait_multipliers` codes it `not_a_gait`), and so is a fit window
+    past the simulated steps (it used to fit an empty range and report a rate of 1)."""
+    model, z, _, _ = stable_gait()
+    off = np.asarray(z) + np.array([0.01, 0.0, 0.0])
+    assert vj.result_names(vj.gait_multipliers(model, off, transverse=False).result) == "not_a_gait"
+    with pytest.raises(ValueError, match="contraction: z_star is not a period-1 gait"):
+        vj.contraction(model, off, num_perturbations=4)
+    for kw in ({"num_steps": 3}, {"fit_window": (10, 8)}, {"num_perturbations": 0}):
+        with pytest.raises(ValueError, match="contraction"):
+            vj.contraction(model, z, **kw)
+
+
+def test_walkers_that_fall_have_no_measured_rate():
+    """Near the unstable gait every perturbed walker falls, or leaves for the stable gait
+    (its error grows tenfold): none measures a decay rate (NaN), nor does the median
+    (it used to be about 1). The predicted spectral radius, from the Jacobian, is 4.3."""
+    model = vj.CompassGait()
+    zu = np.asarray(vj.find_gait(model, "unstable").z)
+    c = vj.contraction(model, zu, num_perturbations=4, scale=1e-3, num_steps=30)
+    assert float(c.spectral_radius) > 1.0
+    assert np.isnan(np.asarray(c.measured_rates)).all() and np.isnan(float(c.measured_rate))

@@ -65,6 +65,21 @@ def test_gait_sensitivity_norm_vs_simulation():
     np.testing.assert_allclose(float(g.norm), np.linalg.norm(fd), rtol=1e-4)
 
 
+def test_slope_and_floor_sensitivity_refuse_or_flag_a_point_that_is_not_a_gait():
+    """Implicit differentiation through the fixed-point equation needs a fixed point:
+    `slope_sensitivity` refuses a point one step moves by 3e-2, and the (pure)
+    `gait_sensitivity_norm` codes it `not_a_gait`; the gait itself is `successful`."""
+    model, z, x_star, _ = stable_gait()
+    off = np.asarray(z) + np.array([0.01, 0.0, 0.0])
+    with pytest.raises(ValueError, match="slope_sensitivity: z_star is not a period-1 gait"):
+        vj.slope_sensitivity(model, off)
+    x_off = model.section_to_state(jnp.asarray(off))
+    assert vj.result_names(vj.gait_sensitivity_norm(model, x_off, 40).result) == "not_a_gait"
+    assert vj.result_names(vj.gait_sensitivity_norm(model, x_star, 40).result) == "successful"
+    with pytest.raises(ValueError, match="num_steps"):
+        vj.gait_sensitivity_norm(model, x_star, 0)
+
+
 def test_floor_offset_zero_is_nominal_step():
     model, _, x_star, period = stable_gait()
     sr = step_jit(floor_step_model(model, 0.0), x_star)

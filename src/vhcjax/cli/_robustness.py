@@ -272,6 +272,10 @@ def run_contraction(args):
             "perturbations grow, and the measured rate is not a contraction"
         )
         warn(args, out["gait_stable_reason"])
+    if not math.isfinite(float(c.measured_rate)):
+        out["measured_rate_reason"] = (
+            "no recovery stayed near the gait (each fell, or its error grew tenfold)"
+        )
     for k, f in (("10x", 10), ("100x", 100)):
         if not math.isfinite(float(out[f"measured_steps_{k}"])):
             out[f"measured_steps_{k}_reason"] = (
@@ -284,10 +288,13 @@ def run_contraction(args):
     if args.json:
         print_json(out)
     else:
-        print(
-            f"spectral radius {float(c.spectral_radius):.6f} (multipliers); measured "
-            f"{float(c.measured_rate):.6f} from {args.perturbations} recoveries"
+        rate = float(c.measured_rate)
+        measured = (
+            f"measured {rate:.6f} from {args.perturbations} recoveries"
+            if math.isfinite(rate)
+            else out["measured_rate_reason"]
         )
+        print(f"spectral radius {float(c.spectral_radius):.6f} (multipliers); {measured}")
         for k in ("10x", "100x"):
             m = float(out[f"measured_steps_{k}"])
             meas = f"{m:.0f} measured" if math.isfinite(m) else out[f"measured_steps_{k}_reason"]

@@ -21,6 +21,7 @@ from .._batching import MAX_DISPATCH, host_workers, padded_map
 from .._programs import stored_jit
 from ..hybrid import FAST_CONFIG
 from ._bisection import bisect_threshold
+from ._gait_check import require_gait
 from ._recovery import CONVERGED, recover
 
 SECTION_NAMES = ("q1", "dq1", "dq2")
@@ -146,7 +147,7 @@ def basin_slice(
     - `model`, `z_star`: the walker and its gait (section coordinates).
     - `axes`: the two perturbed coordinates, e.g. `(0, 1)` for $(q_1, \\dot q_1)$.
     - `half_widths`: the grid spans `z_star[axes[i]] +- half_widths[i]`. Grids with an
-      odd number of points contain the gait itself.
+      odd number of points contain the gait itself (one point: the gait's coordinate).
     - `shape`: grid points along each axis (200 x 200 by default).
     - `num_steps`: steps simulated per point (at most).
     - `tol`: converged when the post-impact state is within `tol` ($\\infty$-norm) of the
@@ -155,7 +156,8 @@ def basin_slice(
     - `config`: swing integration (default `BASIN_CONFIG`, tolerances 1e-8).
     - `progress`: optional wrapper of an iterable (progress bar over chunks).
 
-    **Returns:** a `BasinSlice`.
+    **Returns:** a `BasinSlice`. A `z_star` that one step does not return to
+    (`GAIT_TOL`) raises a `ValueError`.
     """
     z_star = np.asarray(z_star, dtype=float)
     nx, ny = shape
@@ -168,8 +170,9 @@ def basin_slice(
         raise ValueError(f"basin_slice: shape must be two positive integers, got {shape}")
     if len(set(axes)) != 2 or not all(0 <= a < z_star.shape[0] for a in axes):
         raise ValueError(f"basin_slice: axes must be two distinct section coordinates, got {axes}")
-    ox = np.linspace(-half_widths[0], half_widths[0], nx)
-    oy = np.linspace(-half_widths[1], half_widths[1], ny)
+    require_gait(model, z_star, "basin_slice")
+    ox = np.linspace(-hw[0], hw[0], nx) if nx > 1 else np.zeros(1)
+    oy = np.linspace(-hw[1], hw[1], ny) if ny > 1 else np.zeros(1)
     gx, gy = np.meshgrid(ox, oy)  # (ny, nx)
     z = np.repeat(z_star[None], gx.size, 0)
     z[:, axes[0]] += gx.ravel()
@@ -310,12 +313,21 @@ def basin_volume(
     `z_star +- half_widths` in the full section that converges to the gait, with a Wilson
     confidence interval.
 
-    **Returns:** a `BasinVolume`.
+    **Returns:** a `BasinVolume`. A `z_star` that one step does not return to
+    (`GAIT_TOL`) raises a `ValueError`.
     """
     from ._recovery import LABEL_NAMES
 
     z_star = np.asarray(z_star, dtype=float)
     hw = np.asarray(half_widths, dtype=float)
+    if hw.shape != z_star.shape or not (np.isfinite(hw).all() and (hw > 0).all()):
+        raise ValueError(
+            f"basin_volume: half_widths must be {z_star.shape[0]} finite positive numbers (one "
+            f"per section coordinate), got {half_widths}"
+        )
+    if int(num_samples) < 1:
+        raise ValueError(f"basin_volume: num_samples must be >= 1, got {num_samples}")
+    require_gait(model, z_star, "basin_volume")
     key = jax.random.PRNGKey(0) if key is None else key
     u = np.asarray(jax.random.uniform(key, (num_samples, z_star.shape[0]), minval=-1, maxval=1))
     z = z_star[None] + u * hw[None]

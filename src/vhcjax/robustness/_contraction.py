@@ -15,8 +15,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._programs import stored_jit
-from ..hybrid import DEFAULT_CONFIG, jacobian
-from ._recovery import recover
+from .._results import result_names
+from ..hybrid import DEFAULT_CONFIG, step_map
+from ._gait_check import check_returns
+from ._recovery import FELL, recover
 
 
 class Contraction(eqx.Module):
@@ -26,9 +28,11 @@ class Contraction(eqx.Module):
     - `spectral_radius`: $\\rho = \\max |\\lambda|$.
     - `steps_10x`, `steps_100x`: $\\log 0.1/\\log\\rho$ and $\\log 0.01/\\log\\rho$ (predicted).
     - `measured_rate`: median over the recoveries of the fitted per-step decay factor.
-    - `measured_rates`: the fitted factor of every recovery.
+    - `measured_rates`: the fitted factor of every recovery; NaN for a walker that fell
+      or whose error grew tenfold (it left the gait's neighbourhood), so `measured_rate`
+      is NaN where none stayed, as near an unstable gait.
     - `measured_steps_10x`, `measured_steps_100x`: median over recoveries of the first step
-      at which the error is below 1/10 (1/100) of the initial error.
+      at which the error is below 1/10 (1/100) of the initial error (NaN where none is).
     - `distance`: $\\|x_k - x^*\\|_\\infty$ per recovery and step, shape `(batch, steps+1)`.
     - `fit_window`: the steps `(k0, k1)` used in the fit.
     """
@@ -87,18 +91,30 @@ def contraction(
     - `num_perturbations`: number of simulated recoveries.
     - `scale`: size ($\\infty$-norm) of the random initial perturbations (rad, rad/s),
       small enough for the linearization to hold.
-    - `num_steps`: steps simulated per recovery.
+    - `num_steps`: steps simulated per recovery, more than `fit_window[0]`.
     - `fit_window`: steps `(k0, k1)` over which the decay rate is fitted (after the
-      transient of the fast modes, before the solver's error floor).
+      transient of the fast modes, before the solver's error floor); `k1` is clipped to
+      `num_steps`.
     - `key`: a `jax.random.PRNGKey` (default `PRNGKey(0)`).
     - `config`: `SolverConfig` (default tolerances 1e-10: the fit needs errors down to
       ~1e-9 resolved).
 
     **Returns:** a `Contraction`. Host-side (calls `numpy` for the fit); not jittable.
+    A `z_star` that one step does not return to (`GAIT_TOL`) raises a `ValueError`.
     """
+    k0, k1 = (int(k) for k in fit_window)
+    k1 = min(k1, int(num_steps))
+    if not 0 <= k0 < k1:
+        raise ValueError(
+            f"contraction: the fit needs steps k0 < k1 <= num_steps, got fit_window="
+            f"{tuple(fit_window)} and num_steps={num_steps}"
+        )
+    if int(num_perturbations) < 1:
+        raise ValueError(f"contraction: num_perturbations must be >= 1, got {num_perturbations}")
     z_star = jnp.asarray(z_star, dtype=float)
     key = jax.random.PRNGKey(0) if key is None else key
-    J = _jacobian_jit(model, z_star, config)
+    J, mr = _jacobian_jit(model, z_star, config)
+    check_returns(z_star, mr.z_next, "contraction", str(result_names(mr.result)))
     ev = np.linalg.eigvals(np.asarray(J))
     ev = ev[np.argsort(-np.abs(ev))]
     rho = float(np.abs(ev[0]))
@@ -106,17 +122,19 @@ def contraction(
     dz = scale * dz / jnp.max(jnp.abs(dz), axis=1, keepdims=True)
     x0 = jax.vmap(model.section_to_state)(z_star + dz)
     rec = _recover_jit(model, x0, model.section_to_state(z_star), num_steps, config)
-    k0, k1 = fit_window
-    k1 = min(k1, num_steps)
-    rates = _fit_rate(rec.distance, k0, k1)
-    m10 = _first_below(rec.distance, 10.0)
-    m100 = _first_below(rec.distance, 100.0)
+    # A walker that fell, or whose error grew tenfold (it left the neighbourhood where the
+    # linearization holds, e.g. for another gait), measures no decay rate.
+    dist = np.asarray(rec.distance)
+    up = (np.asarray(rec.label) != FELL) & (np.max(dist, axis=1) <= 10 * dist[:, 0])
+    rates = np.where(up, _fit_rate(rec.distance, k0, k1), np.nan)
+    m10 = np.where(up, _first_below(rec.distance, 10.0), -1)
+    m100 = np.where(up, _first_below(rec.distance, 100.0), -1)
     return Contraction(
         multipliers=jnp.asarray(ev),
         spectral_radius=jnp.asarray(rho),
         steps_10x=steps_to_shrink(rho, 10.0),
         steps_100x=steps_to_shrink(rho, 100.0),
-        measured_rate=jnp.asarray(np.median(rates)),
+        measured_rate=jnp.asarray(np.median(rates[up]) if up.any() else np.nan),
         measured_rates=jnp.asarray(rates),
         measured_steps_10x=jnp.asarray(np.median(m10[m10 > 0]) if np.any(m10 > 0) else np.nan),
         measured_steps_100x=jnp.asarray(np.median(m100[m100 > 0]) if np.any(m100 > 0) else np.nan),
@@ -127,7 +145,13 @@ def contraction(
 
 @stored_jit
 def _jacobian_jit(model, z, config):
-    return jacobian(model, z, 1, config)
+    """The step map's Jacobian at `z` and, from the same pass, the step itself."""
+
+    def one_step(zz):
+        mr = step_map(model, zz, 1, config)
+        return mr.z_next, mr
+
+    return jax.jacfwd(one_step, has_aux=True)(z)
 
 
 @stored_jit

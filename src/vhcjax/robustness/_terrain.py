@@ -18,8 +18,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._programs import stored_jit
+from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, step_unchecked
 from ..models import CompassGait
+from ..stability import GAIT_TOL
 from ._bisection import bisect_threshold
 from ._recovery import recover
 
@@ -131,6 +133,9 @@ class GaitSensitivity(eqx.Module):
     - `b`: $\\partial x_1/\\partial h$, the post-impact state change from the step.
     - `A`: the step-to-step Jacobian in the full state (`2n x 2n`), `c`: the step time's
       gradient in the post-impact state.
+    - `result`: `successful`, the failure of the step from `x_star`, or `not_a_gait` where
+      that step does not return to `x_star` (`GAIT_TOL`): then the numbers are not those
+      of a gait.
     """
 
     dtimes: jax.Array
@@ -138,6 +143,7 @@ class GaitSensitivity(eqx.Module):
     b: jax.Array
     A: jax.Array
     c: jax.Array
+    result: RESULTS
 
 
 @stored_jit
@@ -148,8 +154,13 @@ def gait_sensitivity_norm(model, x_star, num_steps=40, config=DEFAULT_CONFIG):
     $\\delta T_0 = t_h h$, $\\delta T_k = c^T \\delta x_k$. `b`, `t_h`, `A` and `c` are
     forward-mode autodiff of single steps through the heel-strike event.
 
-    **Returns:** a `GaitSensitivity`.
+    **Returns:** a `GaitSensitivity` (`num_steps` >= 1, a Python integer). Pure: check
+    its `result`.
     """
+    if not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
+        raise ValueError(
+            f"gait_sensitivity_norm: num_steps must be an integer >= 1, got {num_steps}"
+        )
 
     def disturbed(h):
         sr = step_unchecked(floor_step_model(model, h), x_star, config)
@@ -157,14 +168,23 @@ def gait_sensitivity_norm(model, x_star, num_steps=40, config=DEFAULT_CONFIG):
 
     def normal(x):
         sr = step_unchecked(model, x, config)
-        return sr.x_plus, sr.period
+        return (sr.x_plus, sr.period), sr
 
     b, t_h = jax.jacfwd(disturbed)(jnp.asarray(0.0))
-    A, c = jax.jacfwd(normal)(x_star)
+    (A, c), sr = jax.jacfwd(normal, has_aux=True)(x_star)
+    section = model.state_to_section
+    z = section(x_star)
+    moved = jnp.max(jnp.abs(section(sr.x_plus) - z))
+    periodic = moved <= GAIT_TOL * jnp.maximum(1.0, jnp.max(jnp.abs(z)))
+    code = RESULTS.where(
+        sr.result == RESULTS.successful,
+        RESULTS.where(periodic, RESULTS.successful, RESULTS.not_a_gait),
+        sr.result,
+    )
 
     def body(dx, _):
         return A @ dx, c @ dx
 
     _, dts = jax.lax.scan(body, b, None, length=num_steps - 1)
     dtimes = jnp.concatenate([t_h[None], dts])
-    return GaitSensitivity(dtimes, jnp.linalg.norm(dtimes), b, A, c)
+    return GaitSensitivity(dtimes, jnp.linalg.norm(dtimes), b, A, c, code)

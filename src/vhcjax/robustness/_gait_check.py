@@ -1,0 +1,41 @@
+"""The check each robustness measure makes of the gait it is given: the measures linearize
+about, or converge to, a fixed point of the step map, and their numbers mean nothing
+elsewhere."""
+
+import jax.numpy as jnp
+import numpy as np
+
+from .._results import result_names
+from ..hybrid import DEFAULT_CONFIG, step_map_jit
+from ..stability import GAIT_TOL
+
+
+def check_returns(z_star, z_next, name, code="successful"):
+    """Raise a `ValueError` unless the step from `z_star` completed (`code`) and returned
+    to within `GAIT_TOL` $\\max(1, \\|z^*\\|_\\infty)$ of it (`gait_multipliers`' test)."""
+    z = np.asarray(z_star, dtype=float)
+    if code != "successful":
+        raise ValueError(
+            f"{name}: z_star is not a gait of this model: one step from it ends with "
+            f"{code!r}; find a gait with find_gait"
+        )
+    moved = float(np.max(np.abs(np.asarray(z_next, dtype=float) - z)))
+    bound = GAIT_TOL * max(1.0, float(np.max(np.abs(z))))
+    if not moved <= bound:  # also NaN
+        raise ValueError(
+            f"{name}: z_star is not a period-1 gait of this model: one step moves it by "
+            f"{moved:.3g} (a gait returns to within {bound:.0e}); find a gait with find_gait"
+        )
+
+
+def require_gait(model, z_star, name):
+    """`check_returns` for one step of `model` from the section point `z_star`."""
+    z = jnp.asarray(z_star, dtype=float)
+    dim = model.state_to_section(jnp.zeros(2 * model.n_dof)).shape[0]
+    if z.shape != (dim,):
+        raise ValueError(
+            f"{name}: z_star must have shape ({dim},) (the section coordinates of one gait), "
+            f"got {z.shape}"
+        )
+    mr = step_map_jit(model, z, 1, DEFAULT_CONFIG)
+    check_returns(z, mr.z_next, name, str(result_names(mr.result)))
