@@ -382,6 +382,29 @@ def test_bad_input_and_labels():
         G.find_gait(vj.CompassGait(), "stable", "magic", guess=SEED)
 
 
+def test_inputs_of_the_wrong_shape_or_type_are_refused_in_one_line(gaits):
+    """Batches of the wrong shape get a `ValueError` naming the shapes (they used to fail
+    deep inside JAX); integer parameters are converted to float, so `validate` sees
+    them; a numpy integer step count is a count, not an array to trace."""
+    m = vj.CompassGait()
+    with pytest.raises(ValueError, match="find_gait takes one model"):
+        G.find_gait(vj.CompassGait(mH=jnp.array([10.0])), "stable", guess=SEED)
+    with pytest.raises(ValueError, match="lengths"):
+        G.find_gaits(m, jnp.zeros((0, 2)))
+    with pytest.raises(ValueError, match=r"lengths \[2, 3\]"):
+        G.find_gaits(m, jnp.array([SEED] * 3), psi=jnp.array([0.05, 0.06]))
+    with pytest.raises(ValueError, match="family_multipliers"):
+        vj.family_multipliers(m, np.array([0.05, 0.06]), np.zeros((3, 3)))
+    kw = vj.KneedWalker(ms=np.int64(-1))
+    assert np.asarray(kw.ms).dtype == np.float64 and not bool(kw.validate())
+    assert not bool(vj.CompassGait(mH=np.array(-1)).validate())
+    with pytest.raises(ValueError, match="transverse=False"):
+        vj.gait_multipliers(vj.KneedWalker(), np.zeros(3))
+    g = gaits[3.0, "stable", "vhc"]
+    sim = vj.simulate(vj.CompassGait(psi=math.radians(3.0)), g.x_plus, np.int64(1))
+    assert vj.result_names(sim.result) == "successful"
+
+
 @pytest.mark.slow
 def test_no_guess_other_models_and_sweep():
     """Without a guess: other masses, lengths, gravity and slope, both families; each

@@ -41,6 +41,12 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
     """
     _check(family, method)
     _check_model(model)
+    batched = [jnp.shape(x) for x in jax.tree_util.tree_leaves(model) if jnp.ndim(x) > 0]
+    if batched:
+        raise ValueError(
+            f"find_gait takes one model (0-d parameters), got parameters of shapes "
+            f"{sorted(set(batched))}; find_gaits searches a batch"
+        )
     if throw and not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(model)):
         if not bool(_valid(model)):  # one line now, not a runtime error later
             raise ValueError(
@@ -220,6 +226,11 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord):
     if not sizes:
         raise ValueError("find_gaits needs a batch: guesses, psi or batched model parameters")
     B = max(sizes)
+    if B == 0 or any(size not in (1, B) for size in sizes):
+        raise ValueError(
+            f"find_gaits: the batched inputs (guesses, psi, model parameters) must have one "
+            f"length >= 1 (or 1), got lengths {sorted(set(sizes))}"
+        )
     sign = family_sign(family)
     if B == 1 and guesses is not None:  # one member: no batching to trace or run
         gaits = _search_single(model, guesses, sign, method, solver, bool(chord))

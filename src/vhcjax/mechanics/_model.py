@@ -1,7 +1,7 @@
 """The interface every walker model implements: energies, contact point, guard, relabelling.
 
 A model is an `eqx.Module` whose physical parameters are float64 array leaves (Python
-floats are converted on construction), so `jax.vmap` and `jax.grad` over masses, lengths,
+numbers and integer arrays are converted on construction), so `jax.vmap` and `jax.grad` over masses, lengths,
 gravity and slope work out of the box, and a jitted function compiled for one model is
 reused for every other parameter value (a Python float would be a static, compile-time
 constant under `eqx.filter_jit`: one compilation per slope). From the
@@ -46,6 +46,11 @@ class WalkerModel(eqx.Module):
             if isinstance(value, float) or (isinstance(value, int) and not isinstance(value, bool)):
                 # a transfer, not a conversion program (compiled and looked up per process)
                 object.__setattr__(self, field.name, jax.device_put(np.float64(value)))
+            elif isinstance(value, (np.ndarray, np.generic)) and value.dtype.kind in "iu":
+                # integer arrays too: `validate` checks the float leaves
+                object.__setattr__(self, field.name, jax.device_put(value.astype(np.float64)))
+            elif isinstance(value, jax.Array) and value.dtype.kind in "iu":
+                object.__setattr__(self, field.name, jnp.asarray(value, dtype=float))
 
     #: Parameters that must be positive (masses, lengths, gravity) and that must not be
     #: negative (e.g. the slope), checked by `validate`; every float parameter must be
