@@ -328,6 +328,28 @@ def test_heavy_hip_gait_is_accepted_by_the_newton_error_estimate():
     assert not bool(G.accepted(1e-5, 1e-13))
 
 
+def test_near_a_multiplier_of_one_the_vhc_gait_is_the_accurate_one():
+    """At 1e-4 degrees the leading multiplier is 0.99874: shooting's fixed point is known
+    only to its integration tolerance over 1 - lambda, the VHC search's residual rounds
+    to about 1e-9. Newton's error estimate on the step map integrated at 1e-13 (an
+    independent check) puts the VHC gait within 1e-9 of the fixed point, the shooting
+    gait (tolerance 1e-10) within 1e-7."""
+    m = vj.CompassGait(psi=math.radians(1e-4))
+    guess = (0.00860135, -0.04460258)  # near the fold of (5.13): Newton needs a close guess
+    vhc = G.find_gait(m, "stable", guess=guess, throw=False)
+    shot = G.find_gait(m, "stable", method="shooting", guess=guess, throw=False)
+    assert vj.result_names(vhc.result) == vj.result_names(shot.result) == "successful"
+    tight = vj.DEFAULT_CONFIG._replace(rtol=1e-13, atol=1e-13, max_steps=16384)
+
+    @jax.jit
+    def newton_error(z):
+        step = lambda z: vj.step_map(m, z, 1, tight).z_next - z  # noqa: E731
+        return jnp.linalg.solve(jax.jacfwd(step)(z), step(z))
+
+    for gait, bound in ((vhc, 1e-9), (shot, 1e-7)):
+        assert float(jnp.max(jnp.abs(newton_error(jnp.asarray(gait.z))))) < bound
+
+
 # One compilation each for both families (the family sign and the model are traced).
 _vhc_r = eqx.filter_jit(G.vhc_residual)
 _vhc_J = eqx.filter_jit(jax.jacfwd(G.vhc_residual, argnums=1))
