@@ -193,6 +193,16 @@ def test_chord_finish_gives_the_newton_gaits_and_codes(gaits, method):
     np.testing.assert_allclose(np.asarray(chord.x_plus[0]), np.asarray(one.x_plus), atol=1e-10)
     assert float(jnp.max(chord.residual[:2])) < 1e-10
     assert np.all(np.isfinite(np.asarray(chord.x_plus)))
+    if method == "vhc":
+        # A heavy hip: residuals that round above SUCCESS_TOL. Members a chord finish
+        # leaves there are solved again with Newton steps: the same gaits as without.
+        heavy = vj.CompassGait(mH=5000.0, m1=5.0, m2=5.0)
+        start = jnp.array([(0.2674025, -1.0182185)] * 4)  # near the 2.56-degree gait
+        psi = jnp.radians(jnp.full(4, 2.56))
+        full = G.find_gaits(heavy, start, "stable", method, psi=psi, chord=False)
+        chord = G.find_gaits(heavy, start, "stable", method, psi=psi, chord=True)
+        assert vj.result_names(chord.result) == vj.result_names(full.result) == ["successful"] * 4
+        np.testing.assert_allclose(np.asarray(chord.x_plus), np.asarray(full.x_plus), atol=1e-10)
 
 
 def test_batched_search_under_jit_equals_the_direct_call():
@@ -321,11 +331,15 @@ def test_heavy_hip_gait_is_accepted_by_the_newton_error_estimate():
     assert vj.result_names(vhc.result) == vj.result_names(shot.result) == "successful"
     np.testing.assert_allclose(np.asarray(vhc.x_plus), np.asarray(shot.x_plus), atol=1e-10)
     np.testing.assert_allclose(np.asarray(vhc.x_minus), np.asarray(shot.x_minus), atol=1e-8)
+    # The error estimate decided: at mH = 4000 or 5000 the residual stays above 1e-9.
+    other = G.find_gait(vj.CompassGait(mH=4000.0, m1=5.0, m2=5.0), guess=SEED, throw=False)
+    assert vj.result_names(other.result) == "successful"
+    assert max(float(vhc.residual), float(other.residual)) > G.SUCCESS_TOL
     # The acceptance itself: the residual alone, or a small error estimate with a small
     # residual; never a small error estimate alone (e.g. near a pole of the residual).
     assert bool(G.accepted(5e-10, np.inf))
     assert bool(G.accepted(3e-9, 1e-12)) and not bool(G.accepted(3e-9, 1e-9))
-    assert not bool(G.accepted(1e-5, 1e-13))
+    assert not bool(G.accepted(5e-8, 1e-13))
 
 
 def test_near_a_multiplier_of_one_the_vhc_gait_is_the_accurate_one():
@@ -346,8 +360,8 @@ def test_near_a_multiplier_of_one_the_vhc_gait_is_the_accurate_one():
         step = lambda z: vj.step_map(m, z, 1, tight).z_next - z  # noqa: E731
         return jnp.linalg.solve(jax.jacfwd(step)(z), step(z))
 
-    for gait, bound in ((vhc, 1e-9), (shot, 1e-7)):
-        assert float(jnp.max(jnp.abs(newton_error(jnp.asarray(gait.z))))) < bound
+    errors = [float(jnp.max(jnp.abs(newton_error(jnp.asarray(g.z))))) for g in (vhc, shot)]
+    assert errors[0] < 1e-9 and 1e-9 < errors[1] < 1e-7
 
 
 # One compilation each for both families (the family sign and the model are traced).
@@ -405,7 +419,7 @@ def test_bad_input_and_labels():
 
 
 def test_inputs_of_the_wrong_shape_or_type_are_refused_in_one_line(gaits):
-    """Batches of the wrong shape get a `ValueError` naming the shapes (they used to fail
+    """Batches of the wrong shape get a `ValueError` naming the shapes (not an error from
     deep inside JAX); integer parameters are converted to float, so `validate` sees
     them; a numpy integer step count is a count, not an array to trace."""
     m = vj.CompassGait()
@@ -511,9 +525,13 @@ def test_batched_newton_equals_newton_on_each_member():
         )
         assert np.all(np.isfinite(np.asarray(X)))
         # Newton's error estimate |J^{-1} r|: tiny at the roots, large where there is none
-        # (row 2: x_1^2 = -1, where |J^{-1} r| = (x_1^2 + 1) / |2 x_1| >= 1).
+        # (row 2: x_1^2 = -1, where |J^{-1} r| = (x_1^2 + 1) / |2 x_1| >= 1); none (inf)
+        # after chord steps, whose Jacobian is an old one.
         err = np.asarray(err)
-        assert np.all(err[[0, 1, 3]] < 1e-12) and err[2] >= 1.0
+        if "chord_below" in kw:
+            assert np.all(np.isinf(err[[0, 1, 3]]))
+        else:
+            assert np.all(err[[0, 1, 3]] < 1e-12) and err[2] >= 1.0
 
 
 @pytest.mark.parametrize("fam", ["stable", "unstable"])
@@ -544,8 +562,7 @@ def test_batch_jacobian_matches_finite_differences(gaits, fam):
 def test_converged_gaits_close_well_inside_the_success_test(fam, deg):
     """The Newton-step convergence test (the step from a point, J^-1 r, below rtol) also
     needs |r| < SUCCESS_TOL / 10: with a large Jacobian a tiny step can leave a residual
-    near 1e-9 (here 8.8e-10, and 1.05e-9 reported as `not_converged`, before the cap).
-    The residual is the mismatch between the VHC gait and the hybrid simulation."""
+    near 1e-9 (at these two slopes: 8.8e-10 and 1.05e-9 without that cap)."""
     g = G.find_gait(vj.CompassGait(psi=math.radians(deg)), fam, guess=SEED, throw=False)
     assert vj.result_names(g.result) == "successful"
     assert float(g.residual) < G.SUCCESS_TOL / 10

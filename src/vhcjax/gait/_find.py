@@ -12,10 +12,10 @@ from .._batching import bucket_size, device_multiple, dispatch_size, host_worker
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..solvers import detach
-from ._continuation import _HOMOTOPY_STEPS, _continue, _seed, continue_to_model
+from ._continuation import _HOMOTOPY_STEPS, _continue, _seed, _unknowns, continue_to_model
 from ._derivatives import with_derivatives
 from ._dispatch import _check, _relabel, _search, reference_model
-from ._gait import family_sign
+from ._gait import _NOISY_RESIDUAL, family_sign
 from ._problem1 import _with_psi
 
 
@@ -253,7 +253,28 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord):
         return _search_batch(m, g, sign, method, solver, axes, bool(chord))
 
     gaits = padded_map(search, batched, guesses, max_chunk=chunk, mesh=mesh, stage="gait search")
-    return _clean_failed(_relabel(gaits, family), guesses, B)
+    gaits = _relabel(gaits, family)
+    concrete = not isinstance(gaits.result._value, jax.core.Tracer)  # not under `jit`
+    if chord and guesses is not None and concrete:
+        gaits = _redo_without_chord(gaits, batched, shared, family, method, solver, mesh)
+    return _clean_failed(gaits, guesses, B)
+
+
+def _redo_without_chord(gaits, batched, shared, family, method, solver, mesh):
+    """Members a chord finish left `not_converged` with a residual below 1e-8 are solved
+    again, with Newton steps, from where they stopped: a residual that rounds above
+    `SUCCESS_TOL` (a heavy hip) needs Newton's error estimate to be accepted, and the
+    chord steps' Jacobian is too old to give one. (Host-side: not under `jit`.)"""
+    code = np.asarray(gaits.result._value)
+    redo = np.flatnonzero(
+        (code == RESULTS.not_converged._value) & (np.asarray(gaits.residual) < _NOISY_RESIDUAL)
+    )
+    if redo.size == 0:
+        return gaits
+    params = jax.tree_util.tree_map(lambda x: jnp.asarray(x)[redo], batched)
+    start = np.asarray(jax.vmap(lambda g: _unknowns(g, method))(gaits))[redo]
+    again = _find_gaits(eqx.combine(params, shared), start, family, method, solver, mesh, False)
+    return jax.tree_util.tree_map(lambda a, b: jnp.asarray(a).at[redo].set(b), gaits, again)
 
 
 @eqx.filter_jit  # one small program, not a dozen operations dispatched one by one

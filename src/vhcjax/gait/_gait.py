@@ -22,7 +22,7 @@ SUCCESS_TOL = 1e-9
 #: gait whose residual is above `SUCCESS_TOL` (`accepted`).
 ERROR_TOL = 1e-10
 #: ... and the residual such a gait may keep.
-_NOISY_RESIDUAL = 1e-6
+_NOISY_RESIDUAL = 1e-8
 
 #: Loosest integration tolerance of the inexact Newton iterations (`damped_newton`).
 _LOOSE_TOL = 1e-6
@@ -35,7 +35,7 @@ _RESIDUAL_CAP = SUCCESS_TOL / 10
 def accepted(residual, error):
     """Whether a search ends at a gait: its residual (max-norm) is below `SUCCESS_TOL`, or
     Newton's estimate of the error of its unknowns, $\\|J^{-1}r\\|_\\infty$, is below
-    `ERROR_TOL` with a residual below 1e-6. The second admits problems whose residual
+    `ERROR_TOL` with a residual below 1e-8. The second admits problems whose residual
     cannot be evaluated to `SUCCESS_TOL`: with a heavy hip (hip-to-leg mass ratio 1000)
     the quadratic (5.13) nears a double root and $h = (b - P_{11} d)/P_{12}$ divides by
     a small $P_{12}$, so the rounding of the residual is a few 1e-9 while $(a, b)$ is

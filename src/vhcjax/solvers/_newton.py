@@ -63,8 +63,9 @@ def damped_newton(
 
     **Returns:** `(x, r, aux, iterations, error)` at the last accepted point;
     `iterations` counts accepted steps, `error` is $\|J^{-1}r\|_\infty$ there (the
-    Newton estimate of the error of $x$, with the chord Jacobian after chord steps;
-    `inf` where it is not finite).
+    Newton estimate of the error of $x$; `inf` where it is not finite, after chord
+    steps (their Jacobian is an old one) and where $r$ was not evaluated at the final
+    tolerance).
     """
     call = (lambda y, tol: fn(y)) if tolerances is None else fn
 
@@ -271,7 +272,11 @@ def damped_newton_batch(
         )
     X, R, J, aux, k = carry[:5]
     error = norm(solve(J, R))
-    return X, R, aux, k, jnp.where(jnp.isfinite(error), error, jnp.inf)
+    # No estimate from a Jacobian frozen by chord steps, nor from a loose residual.
+    trusted = jnp.isfinite(error) & ~carry[8]
+    if tolerances is not None:
+        trusted = trusted & (carry[9] <= final)
+    return X, R, aux, k, jnp.where(trusted, error, jnp.inf)
 
 
 def levenberg_marquardt(residual, x0, rtol, atol, max_steps):
