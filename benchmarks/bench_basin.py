@@ -88,6 +88,9 @@ def main(argv=None):
             cfg,
         )
     )
+    from vhcjax.robustness._gait_check import require_gait
+
+    require_gait(model, z_star, "basin_slice")  # its one-step program, compiled here too
     compile_s = time.perf_counter() - t0
 
     t0 = time.perf_counter()

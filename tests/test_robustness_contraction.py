@@ -34,7 +34,7 @@ def test_measured_decay_matches_multipliers():
 def test_contraction_refuses_a_point_that_is_not_a_gait_and_a_fit_it_cannot_make():
     """The measures linearize about a fixed point of the step map: a point one step moves
     by 3e-2 is refused (`gait_multipliers` codes it `not_a_gait`), and so is a fit window
-    past the simulated steps (it used to fit an empty range and report a rate of 1)."""
+    past the simulated steps (an empty range, whose fit would be a rate of 1)."""
     model, z, _, _ = stable_gait()
     off = np.asarray(z) + np.array([0.01, 0.0, 0.0])
     assert vj.result_names(vj.gait_multipliers(model, off, transverse=False).result) == "not_a_gait"
@@ -48,7 +48,8 @@ def test_contraction_refuses_a_point_that_is_not_a_gait_and_a_fit_it_cannot_make
 def test_walkers_that_fall_have_no_measured_rate():
     """Near the unstable gait every perturbed walker falls, or leaves for the stable gait
     (its error grows tenfold): none measures a decay rate (NaN), nor does the median
-    (it used to be about 1). The predicted spectral radius, from the Jacobian, is 4.3."""
+    (a fit of the stopped or saturated errors would give about 1). The predicted spectral
+    radius, from the Jacobian, is 4.3."""
     model = vj.CompassGait()
     zu = np.asarray(vj.find_gait(model, "unstable").z)
     c = vj.contraction(model, zu, num_perturbations=4, scale=1e-3, num_steps=30)

@@ -73,6 +73,10 @@ def test_slope_and_floor_sensitivity_refuse_or_flag_a_point_that_is_not_a_gait()
     off = np.asarray(z) + np.array([0.01, 0.0, 0.0])
     with pytest.raises(ValueError, match="slope_sensitivity: z_star is not a period-1 gait"):
         vj.slope_sensitivity(model, off)
+    # A step that fails hands back its start: the step's code decides, not the distance.
+    back = np.asarray(z) * np.array([1.0, -1.0, 1.0])  # the stance leg swings uphill
+    with pytest.raises(ValueError, match="slope_sensitivity: z_star is not a gait .* ends with"):
+        vj.slope_sensitivity(model, back)
     x_off = model.section_to_state(jnp.asarray(off))
     assert vj.result_names(vj.gait_sensitivity_norm(model, x_off, 40).result) == "not_a_gait"
     assert vj.result_names(vj.gait_sensitivity_norm(model, x_star, 40).result) == "successful"

@@ -88,9 +88,9 @@ def plot_contraction(c, path=None, case=None):
     rho = float(c.spectral_radius)
     ref = np.median(d[:, 0]) * rho**k
     ax.semilogy(k, ref, "k--", lw=1.5, label=rf"$\rho^k$, $\rho$ = {rho:.4f} (multipliers)")
-    ax.semilogy(
-        [], [], color="C0", label=f"simulated recoveries (fitted rate {float(c.measured_rate):.4f})"
-    )
+    rate = float(c.measured_rate)
+    fitted = f"fitted rate {rate:.4f}" if np.isfinite(rate) else "none stayed near the gait"
+    ax.semilogy([], [], color="C0", label=f"simulated recoveries ({fitted})")
     ax.set_xlabel("step k")
     ax.set_ylabel(r"$\|x_k - x^*\|_\infty$ after impact")
     ax.set_title(

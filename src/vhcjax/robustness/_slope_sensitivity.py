@@ -20,7 +20,7 @@ import numpy as np
 from .._programs import stored_jit
 from ..hybrid import DEFAULT_CONFIG
 from ..solvers import implicit_outputs, linearised
-from ._gait_check import check_returns
+from ._gait_check import require_gait
 
 
 def _with_psi(model, psi):
@@ -83,7 +83,6 @@ def _implicit(model, z, config):
     # implicit-function-theorem tangents, the step-map Jacobian its forward-over-forward
     # one; one `jax.jvp` along the slope gives every total derivative.
     values = _gait_outputs_jit(model, z, config)
-    check_returns(z, values[0], "slope_sensitivity")
 
     def along(psi):
         m = _with_psi(model, psi)
@@ -102,6 +101,7 @@ def slope_sensitivity(model, z_star, *, config=DEFAULT_CONFIG):
     **Returns:** a `SlopeSensitivity`. The eigen-decomposition runs on the host (numpy).
     A `z_star` that one step does not return to (`GAIT_TOL`) raises a `ValueError`.
     """
+    require_gait(model, z_star, "slope_sensitivity")
     z = jnp.asarray(z_star, dtype=float)
     (zn, T, L, v), dz, (dT, dL, dv), J, dJ = _implicit(model, z, config)
     Jn, dJn = np.asarray(J), np.asarray(dJ)

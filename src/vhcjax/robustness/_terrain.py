@@ -146,7 +146,6 @@ class GaitSensitivity(eqx.Module):
     result: RESULTS
 
 
-@stored_jit
 def gait_sensitivity_norm(model, x_star, num_steps=40, config=DEFAULT_CONFIG):
     """Gait sensitivity norm (Hobbelen and Wisse 2007) for floor-height disturbances with
     step time as the gait indicator, from the linearized step-to-step map with the floor
@@ -154,14 +153,17 @@ def gait_sensitivity_norm(model, x_star, num_steps=40, config=DEFAULT_CONFIG):
     $\\delta T_0 = t_h h$, $\\delta T_k = c^T \\delta x_k$. `b`, `t_h`, `A` and `c` are
     forward-mode autodiff of single steps through the heel-strike event.
 
-    **Returns:** a `GaitSensitivity` (`num_steps` >= 1, a Python integer). Pure: check
-    its `result`.
+    **Returns:** a `GaitSensitivity` (`num_steps` >= 1, static). Pure: check its `result`.
     """
-    if not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
+    if isinstance(num_steps, bool) or not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
         raise ValueError(
-            f"gait_sensitivity_norm: num_steps must be an integer >= 1, got {num_steps}"
+            f"gait_sensitivity_norm: num_steps must be an integer >= 1, got {num_steps!r}"
         )
+    return _gait_sensitivity_norm(model, x_star, int(num_steps), config)
 
+
+@stored_jit
+def _gait_sensitivity_norm(model, x_star, num_steps, config):
     def disturbed(h):
         sr = step_unchecked(floor_step_model(model, h), x_star, config)
         return sr.x_plus, sr.period

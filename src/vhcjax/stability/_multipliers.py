@@ -243,12 +243,15 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, transverse=Tru
     zs = np.asarray(zs, float)
     x = jax.ShapeDtypeStruct((2 * model.n_dof,), jnp.float64)
     n = jax.eval_shape(model.state_to_section, x).shape[0]
-    if psis.ndim != 1 or psis.shape[0] == 0 or zs.size != psis.shape[0] * n:
+    B = psis.shape[0]
+    one = B == 1 and zs.shape == (n,)  # one gait, without its batch axis
+    if psis.ndim != 1 or B == 0 or not (zs.shape == (B, n) or one):
         raise ValueError(
             f"family_multipliers: psis must have shape (B,) with B >= 1 and zs shape (B, {n}), "
             f"got {psis.shape} and {zs.shape}"
         )
-    zs = zs.reshape(psis.shape[0], n)
+    _check_single_domain(model, transverse, "family_multipliers")
+    zs = zs.reshape(B, n)
     out = padded_map(
         lambda p, z: _family_multipliers_padded(model, p, z, config, transverse),
         psis,
@@ -280,17 +283,21 @@ def gait_multipliers(model, z, config=DEFAULT_CONFIG, *, transverse=True):
             f"gait_multipliers: z must be a Gait or the {n} section coordinates "
             f"(model.state_to_section of the post-impact state), got shape {np.shape(z)}"
         )
-    if transverse and getattr(model, "num_domains", 1) > 1:
-        raise ValueError(
-            f"gait_multipliers: the transverse linearization here is for single-domain "
-            f"models; {type(model).__name__} has {model.num_domains} domains: use "
-            f"transverse=False (Poincare multipliers), or vhcjax.control's per-domain one"
-        )
+    _check_single_domain(model, transverse, "gait_multipliers")
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((model, z)))
     if hasattr(model, "psi"):  # an array leaf, also when set by hand (no compile per slope)
         model = with_slope(model, model.psi)
     out = _gait_multipliers_jit(model, jnp.asarray(z, float), config, transverse)
     return out if traced else jax.device_get(out)
+
+
+def _check_single_domain(model, transverse, name):
+    if transverse and getattr(model, "num_domains", 1) > 1:
+        raise ValueError(
+            f"{name}: the transverse linearization here is for single-domain models; "
+            f"{type(model).__name__} has {model.num_domains} domains: use transverse=False "
+            f"(Poincare multipliers), or vhcjax.control's per-domain one"
+        )
 
 
 _gait_multipliers_jit = stored_jit(_gait_multipliers)
