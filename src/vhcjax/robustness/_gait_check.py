@@ -6,8 +6,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._results import result_names
-from ..hybrid import DEFAULT_CONFIG, step_map_jit
-from ..stability import GAIT_TOL
+from ..hybrid import DEFAULT_CONFIG, check_section_shape, step_map_jit
+from ..stability import GAIT_TOL, returns_to
 
 
 def check_returns(z_star, z_next, name, code="successful"):
@@ -19,9 +19,9 @@ def check_returns(z_star, z_next, name, code="successful"):
             f"{name}: z_star is not a gait of this model: one step from it ends with "
             f"{code!r}; find a gait with find_gait"
         )
-    moved = float(np.max(np.abs(np.asarray(z_next, dtype=float) - z)))
-    bound = GAIT_TOL * max(1.0, float(np.max(np.abs(z))))
-    if not moved <= bound:  # also NaN
+    if not bool(returns_to(z, z_next)):
+        moved = float(np.max(np.abs(np.asarray(z_next, dtype=float) - z)))
+        bound = GAIT_TOL * max(1.0, float(np.max(np.abs(z))))
         raise ValueError(
             f"{name}: z_star is not a period-1 gait of this model: one step moves it by "
             f"{moved:.3g} (a gait returns to within {bound:.0e}); find a gait with find_gait"
@@ -31,11 +31,6 @@ def check_returns(z_star, z_next, name, code="successful"):
 def require_gait(model, z_star, name):
     """`check_returns` for one step of `model` from the section point `z_star`."""
     z = jnp.asarray(z_star, dtype=float)
-    dim = model.state_to_section(jnp.zeros(2 * model.n_dof)).shape[0]
-    if z.shape != (dim,):
-        raise ValueError(
-            f"{name}: z_star must have shape ({dim},) (the section coordinates of one gait), "
-            f"got {z.shape}"
-        )
+    check_section_shape(model, z, f"{name}: z_star")
     mr = step_map_jit(model, z, 1, DEFAULT_CONFIG)
     check_returns(z, mr.z_next, name, str(result_names(mr.result)))

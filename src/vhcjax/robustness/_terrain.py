@@ -21,7 +21,7 @@ from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, step_unchecked
 from ..models import CompassGait
-from ..stability import GAIT_TOL
+from ..stability import returns_to
 from ._bisection import bisect_threshold
 from ._recovery import recover
 
@@ -174,10 +174,7 @@ def _gait_sensitivity_norm(model, x_star, num_steps, config):
 
     b, t_h = jax.jacfwd(disturbed)(jnp.asarray(0.0))
     (A, c), sr = jax.jacfwd(normal, has_aux=True)(x_star)
-    section = model.state_to_section
-    z = section(x_star)
-    moved = jnp.max(jnp.abs(section(sr.x_plus) - z))
-    periodic = moved <= GAIT_TOL * jnp.maximum(1.0, jnp.max(jnp.abs(z)))
+    periodic = returns_to(model.state_to_section(x_star), model.state_to_section(sr.x_plus))
     code = RESULTS.where(
         sr.result == RESULTS.successful,
         RESULTS.where(periodic, RESULTS.successful, RESULTS.not_a_gait),

@@ -26,6 +26,7 @@ from ._multipliers import (
     period_doubling_slope as period_doubling_slope,
     period_doubling_slopes_from_diagram as period_doubling_slopes_from_diagram,
     period_k_orbit as period_k_orbit,
+    returns_to as returns_to,
     settle as settle,
     to_midswing as to_midswing,
     transverse_note as transverse_note,

@@ -166,6 +166,13 @@ def _transverse_checks(model, x0, sr, tl, pm, config):
 GAIT_TOL = 1e-6
 
 
+def returns_to(z, z_next):
+    """Whether one step from the section point `z` came back to it: `z_next` within
+    `GAIT_TOL` $\\max(1, \\|z\\|_\\infty)$ (False where not finite). Traceable."""
+    moved = jnp.max(jnp.abs(jnp.asarray(z_next) - jnp.asarray(z)))
+    return moved <= GAIT_TOL * jnp.maximum(1.0, jnp.max(jnp.abs(jnp.asarray(z))))
+
+
 def _gait_multipliers(model, z, config=DEFAULT_CONFIG, transverse=True):
     """Both multiplier computations at the period-1 gait with section coordinates `z`,
     with the checks of the transverse one (`transverse=False`: the Poincare ones only)."""
@@ -180,8 +187,7 @@ def _gait_multipliers(model, z, config=DEFAULT_CONFIG, transverse=True):
     J, sr = jax.jacfwd(step, has_aux=True)(z)
     pm = _sort(jnp.linalg.eigvals(J))
     # multipliers are those of a fixed point of the step map only
-    moved = jnp.max(jnp.abs(model.state_to_section(sr.x_plus) - z))
-    periodic = moved <= GAIT_TOL * jnp.maximum(1.0, jnp.max(jnp.abs(z)))
+    periodic = returns_to(z, model.state_to_section(sr.x_plus))
     code = RESULTS.where(
         sr.result == RESULTS.successful,
         RESULTS.where(
