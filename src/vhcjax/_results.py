@@ -21,6 +21,10 @@ class RESULTS(eqx.Enumeration):
     max_steps_reached = "The ODE solver hit `max_steps` before the step ended."
     not_converged = "The gait search did not converge."
     no_real_root = "No real root of the energy quadratic for d (thesis 5.13)."
+    other_root = (
+        "The family passes to the other root of the energy quadratic (thesis 5.13): the "
+        "gait goes on as a gait of the other family."
+    )
     singular_phi_ode = (
         "The phi'' ODE is singular along the arc (kinetic term or determinant vanishes)."
     )

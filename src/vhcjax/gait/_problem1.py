@@ -137,6 +137,31 @@ def _solve_for_d(model, data, b, family):
     return (-B + sign * root) / (2 * A), disc >= 0
 
 
+def _into_real_region(model, ab):
+    """$(a, b)$ moved into the region where (5.13) has real roots, if it lies outside.
+
+    For fixed $a$ the energy gap is a quadratic form in $(b, d)$ plus a constant (the
+    velocities (5.9) are linear in $b, d$), so the discriminant of (5.13) is linear in
+    $u = b^2$: $\\Delta(u) = \\Delta(0) + k u$. A guess with $\\Delta < 0$ is reflected
+    across the edge $u_e = -\\Delta(0)/k$ to $2u_e - u$, as far inside as it was outside
+    ($u_e/2$ if that is negative), keeping the sign of $b$. Outside the region the
+    residual is a constant that Newton cannot leave, and gaits lie close to the edge: a
+    heavy hip's within a relative $10^{-7}$, and a family near the slope where it passes
+    to the other root of (5.13) closer still. A guess inside the region, or where no
+    edge exists, is kept."""
+    a, b = ab[0], ab[1]
+    data = _impact_data(model, a)
+    (A, B, C), (A0, B0, C0) = (_quadratic(model, data, x) for x in (b, jnp.zeros_like(b)))
+    disc, disc0 = B**2 - 4 * A * C, B0**2 - 4 * A0 * C0
+    u = b**2
+    k = (disc - disc0) / jnp.where(u > 0, u, 1.0)
+    u_edge = -disc0 / jnp.where(k != 0, k, 1.0)
+    u_new = jnp.where(2 * u_edge - u > 0, 2 * u_edge - u, 0.5 * u_edge)
+    move = (disc < 0) & (u > 0) & (k != 0) & (u_edge > 0) & jnp.isfinite(u_new)
+    b_new = jnp.sign(b) * jnp.sqrt(jnp.where(move, u_new, u))
+    return jnp.stack([a, jnp.where(move, b_new, b)])
+
+
 class BoundaryData(eqx.Module):
     """Everything Problem 1 derives from $(a, b)$ before and after the $\\phi$ integration."""
 
@@ -353,6 +378,10 @@ def vhc_search(
             config=config,
         )
     ab0 = jnp.asarray(guess, dtype=float)[..., :2]
+    if axes is None:
+        ab0 = _into_real_region(model, ab0)
+    else:
+        ab0 = eqx.filter_vmap(_into_real_region, in_axes=(axes, 0))(model, ab0)
     res_fn = lambda ab: vhc_residual(model, ab, family, config)  # noqa: E731
     if solver == "newton":
         return _vhc_newton(

@@ -19,7 +19,7 @@ from ._continuation import _run_continuation, _tangent, _unknowns, continue_to_m
 from ._dispatch import _check, _relabel
 from ._find import find_gaits
 from ._gait import _REFERENCE_PSI, Gait, family_sign
-from ._problem1 import _with_psi
+from ._problem1 import _with_psi, quadratic_coefficients
 
 
 # ---------------------------------------------------------------------------------------
@@ -75,6 +75,10 @@ class Sweep(eqx.Module):
                 continue
             reason = {
                 "no_real_root": "the energy quadratic (5.13) has no real root for d",
+                "other_root": (
+                    "the gait reaches a double root of the energy quadratic (5.13) and "
+                    f"goes on as a gait of the other family ({_other_family(self.gaits.family)!r})"
+                ),
                 "singular_phi_ode": "the phi'' ODE becomes singular along the arc",
                 "infeasible_uphill": "the solution turned into an uphill (negative-time) one",
             }.get(names[i], names[i])
@@ -245,6 +249,7 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
         guesses = _hermite(ps, pa, za, ta)
         gaits = find_gaits(model, jnp.asarray(guesses), family, method, psi=jnp.asarray(ps))
         gaits, tangent, have = _retry(model, ps, gaits, family, method, sign, anchor_step, tangents)
+        gaits = _other_root(model, ps, gaits, tangent, have, family, method)
     # 5. the tangents still wanted: all of them, or those next to a missed slope (a fold?)
     # in the order of the slopes or in the order given (`ends()` looks there)
     ok = np.asarray(gaits.result._value) == RESULTS.successful._value
@@ -317,6 +322,98 @@ def _retry(model, ps, gaits, family, method, sign, reach, all_tangents=True):
             have[take] = True
         ok[take] = True
     return gaits, T, have
+
+
+def _other_family(family):
+    return "unstable" if family == "stable" else "stable"
+
+
+#: Relative discriminant of (5.13), $(B^2 - 4AC)/B^2$, below which a found gait next to a
+#: missed slope is near a double root, where its family may pass to the other root.
+_DOUBLE_ROOT = 1e-4
+#: Missed slopes searched for a passage to the other root beyond each such gait.
+_PASSAGE_RUN = 3
+
+
+@stored_jit
+def _relative_discriminant_padded(model, psis, zs):
+    def one(p, z):
+        A, B, C = quadratic_coefficients(_with_psi(model, p), z[0], z[1])
+        return (B**2 - 4 * A * C) / B**2
+
+    return jax.vmap(one)(psis, zs)
+
+
+def _other_root(model, ps, gaits, T, have, family, method):
+    """Code `other_root` the missed slopes where the family passes to the other root of
+    (5.13) (VHC only). Along a family the discriminant can fall to zero and rise again:
+    the gait goes on, continuously, as a gait of the other family, and this family ends
+    there. Next to a found gait within `_DOUBLE_ROOT` of a double root, the first
+    `_PASSAGE_RUN` missed slopes beyond it are searched with the other root from that
+    gait's tangent prediction. The search succeeding closer to the prediction than a
+    quarter of the prediction's step shows the passage; the missed slopes up to there
+    (gaits too close to the double root to be solved to 1e-9) are coded with it."""
+    import numpy as np
+
+    if method != "vhc":
+        return gaits
+    ok = np.asarray(gaits.result._value) == RESULTS.successful._value
+    n = len(ok)
+    runs, near = [], []  # the missed slopes beyond each found gait next to a miss
+    for j in np.where(_edges(ok))[0]:
+        for step in (-1, 1):
+            run = []
+            i = j + step
+            while 0 <= i < n and not ok[i] and len(run) < _PASSAGE_RUN:
+                run.append(i)
+                i += step
+            if run:
+                runs.append(run)
+                near.append(j)
+    if not runs:
+        return gaits
+    near = np.asarray(near)
+    Z = np.asarray(jax.vmap(lambda g: _unknowns(g, method))(gaits))
+    rel = np.asarray(
+        padded_map(
+            lambda p, z: _relative_discriminant_padded(model, p, z),
+            ps[near],
+            Z[near],
+            stage="discriminants",
+        )
+    )
+    runs = [r for r, c in zip(runs, rel < _DOUBLE_ROOT) if c]
+    near = near[rel < _DOUBLE_ROOT]
+    if not runs:
+        return gaits
+    sign = family_sign(family)
+    todo = np.unique(near[~have[near]])
+    if todo.size:
+        T = T.copy()
+        T[todo] = _tangents(model, ps[todo], Z[todo], sign, method)
+    miss = np.concatenate([np.asarray(r) for r in runs])
+    start = np.concatenate([np.full(len(r), j) for r, j in zip(runs, near)])
+    step = T[start] * (ps[miss] - ps[start])[:, None]
+    guess = Z[start] + step
+    again = find_gaits(
+        model, jnp.asarray(guess), _other_family(family), method, psi=jnp.asarray(ps[miss])
+    )
+    found = np.asarray(again.result._value) == RESULTS.successful._value
+    off = np.abs(np.asarray(jax.vmap(lambda g: _unknowns(g, method))(again)) - guess).max(-1)
+    passed = found & (off <= 0.25 * np.abs(step).max(-1))
+    mask = np.zeros(n, bool)
+    k = 0
+    for run in runs:
+        hit = np.where(passed[k : k + len(run)])[0]
+        if hit.size:
+            mask[run[: hit[0] + 1]] = True
+        k += len(run)
+    if not mask.any():
+        return gaits
+    code = jax.vmap(lambda p, r: RESULTS.where(p, RESULTS.other_root, r))(
+        jnp.asarray(mask), gaits.result
+    )
+    return eqx.tree_at(lambda g: g.result, gaits, code)
 
 
 def _put(a, idx, values):
