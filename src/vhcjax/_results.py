@@ -21,10 +21,6 @@ class RESULTS(eqx.Enumeration):
     max_steps_reached = "The ODE solver hit `max_steps` before the step ended."
     not_converged = "The gait search did not converge."
     no_real_root = "No real root of the energy quadratic for d (thesis 5.13)."
-    other_root = (
-        "The family passes to the other root of the energy quadratic (thesis 5.13): the "
-        "gait goes on as a gait of the other family."
-    )
     singular_phi_ode = (
         "The phi'' ODE is singular along the arc (kinetic term or determinant vanishes)."
     )
@@ -69,6 +65,11 @@ class RESULTS(eqx.Enumeration):
         "The state is not a period-1 gait: one step moves it on the section by more than "
         "1e-6 relative to max(1, |z|), so its Jacobian's eigenvalues are not Floquet "
         "multipliers."
+    )
+    other_root = (
+        "At or before this slope the family passes through a double root of the energy "
+        "quadratic (thesis 5.13) and goes on as a gait of the other family (set by VHC "
+        "sweeps)."
     )
 
 

@@ -158,7 +158,7 @@ def _into_real_region(model, ab):
     u_edge = -disc0 / jnp.where(k != 0, k, 1.0)
     u_new = jnp.where(2 * u_edge - u > 0, 2 * u_edge - u, 0.5 * u_edge)
     move = (disc < 0) & (u > 0) & (k != 0) & (u_edge > 0) & jnp.isfinite(u_new)
-    b_new = jnp.sign(b) * jnp.sqrt(jnp.where(move, u_new, u))
+    b_new = jnp.sign(b) * jnp.sqrt(jnp.where(move, u_new, 1.0))
     return jnp.stack([a, jnp.where(move, b_new, b)])
 
 
@@ -346,7 +346,8 @@ def vhc_search(
     **Arguments:**
 
     - `model`: a two-DOF `WalkerModel` (e.g. `CompassGait`).
-    - `guess`: $(a_0, b_0)$.
+    - `guess`: $(a_0, b_0)$; one outside the region where (5.13) has real roots is first
+      reflected into it (`_into_real_region`).
     - `family`: `"stable"` (thesis selector 2) or `"unstable"` (selector 1).
     - `solver`: `"newton"` (default: `damped_newton`, forward-mode Jacobian, steps
       damped Levenberg-Marquardt style where a full step fails), `"lm"` (optimistix's

@@ -74,7 +74,11 @@ class Sweep(eqx.Module):
             if prev is None:
                 continue
             reason = {
-                "no_real_root": "the energy quadratic (5.13) has no real root for d",
+                # a gait always has a real root ((2Ad + B)^2 = B^2 - 4AC): a search failure
+                "no_real_root": (
+                    "no gait found: the search left the region where the energy quadratic "
+                    "(5.13) has real roots"
+                ),
                 "other_root": (
                     "the gait reaches a double root of the energy quadratic (5.13) and "
                     f"goes on as a gait of the other family ({_other_family(self.gaits.family)!r})"
@@ -196,6 +200,8 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
        differences between anchors.
     4. Slopes the batch missed are retried from their nearest solved slope (its gait and
        tangent), a few rounds.
+    5. (VHC) Missed slopes where the family passes through a double root of (5.13) and
+       goes on as a gait of the other family are coded `other_root`.
 
     The slopes may come in any order. `Sweep.ends()` says where and why the family ends.
 
@@ -249,8 +255,8 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
         guesses = _hermite(ps, pa, za, ta)
         gaits = find_gaits(model, jnp.asarray(guesses), family, method, psi=jnp.asarray(ps))
         gaits, tangent, have = _retry(model, ps, gaits, family, method, sign, anchor_step, tangents)
-        gaits = _other_root(model, ps, gaits, tangent, have, family, method)
-    # 5. the tangents still wanted: all of them, or those next to a missed slope (a fold?)
+        gaits, tangent, have = _other_root(model, ps, gaits, tangent, have, family, method)
+    # 6. the tangents still wanted: all of them, or those next to a missed slope (a fold?)
     # in the order of the slopes or in the order given (`ends()` looks there)
     ok = np.asarray(gaits.result._value) == RESULTS.successful._value
     inverse = np.empty_like(order)
@@ -325,7 +331,7 @@ def _retry(model, ps, gaits, family, method, sign, reach, all_tangents=True):
 
 
 def _other_family(family):
-    return "unstable" if family == "stable" else "stable"
+    return {"stable": "unstable", "unstable": "stable"}.get(family, "the other family")
 
 
 #: Relative discriminant of (5.13), $(B^2 - 4AC)/B^2$, below which a found gait next to a
@@ -336,27 +342,37 @@ _PASSAGE_RUN = 3
 
 
 @stored_jit
-def _relative_discriminant_padded(model, psis, zs):
-    def one(p, z):
+def _discriminant_rate_padded(model, psis, zs, ts):
+    """The relative discriminant of (5.13) at gaits `zs` on slopes `psis`, and its rate
+    of change along the family (direction $(1, dz^*/d\\psi)$ = `(1, ts)`)."""
+
+    def relative(p, z):
         A, B, C = quadratic_coefficients(_with_psi(model, p), z[0], z[1])
         return (B**2 - 4 * A * C) / B**2
 
-    return jax.vmap(one)(psis, zs)
+    def one(p, z, t):
+        return jax.jvp(relative, (p, z), (jnp.ones_like(p), t))
+
+    return jax.vmap(one)(psis, zs, ts)
 
 
 def _other_root(model, ps, gaits, T, have, family, method):
     """Code `other_root` the missed slopes where the family passes to the other root of
-    (5.13) (VHC only). Along a family the discriminant can fall to zero and rise again:
-    the gait goes on, continuously, as a gait of the other family, and this family ends
-    there. Next to a found gait within `_DOUBLE_ROOT` of a double root, the first
-    `_PASSAGE_RUN` missed slopes beyond it are searched with the other root from that
-    gait's tangent prediction. The search succeeding closer to the prediction than a
-    quarter of the prediction's step shows the passage; the missed slopes up to there
-    (gaits too close to the double root to be solved to 1e-9) are coded with it."""
+    (5.13) (VHC only). Along a family the discriminant $\\Delta$ can fall to zero and rise
+    again: the gait goes on, continuously, as a gait of the other family, and this family
+    ends there. A found gait next to a missed slope is a candidate when its relative
+    $\\Delta$ is below `_DOUBLE_ROOT` and $\\sqrt{\\Delta}$ (smooth through the passage)
+    extrapolated along the family reaches zero beyond it, at $\\psi_0$. The first
+    `_PASSAGE_RUN` missed slopes beyond it are searched with the other root from its
+    tangent prediction. A passage is shown where that search succeeds, closer to the
+    prediction than a quarter of the prediction's step, with $\\psi_0$ at most twice as
+    far as that slope; the missed slopes up to there (gaits too close to the double root
+    to be solved to 1e-9, or past the passage) are coded with it. **Returns:** the gaits,
+    and the tangents and where they were computed (as `_retry`)."""
     import numpy as np
 
     if method != "vhc":
-        return gaits
+        return gaits, T, have
     ok = np.asarray(gaits.result._value) == RESULTS.successful._value
     n = len(ok)
     runs, near = [], []  # the missed slopes beyond each found gait next to a miss
@@ -371,28 +387,36 @@ def _other_root(model, ps, gaits, T, have, family, method):
                 runs.append(run)
                 near.append(j)
     if not runs:
-        return gaits
+        return gaits, T, have
     near = np.asarray(near)
+    sign = family_sign(family)
     Z = np.asarray(jax.vmap(lambda g: _unknowns(g, method))(gaits))
-    rel = np.asarray(
-        padded_map(
-            lambda p, z: _relative_discriminant_padded(model, p, z),
+    todo = np.unique(near[~have[near]])
+    if todo.size:
+        T, have = T.copy(), have.copy()
+        T[todo] = _tangents(model, ps[todo], Z[todo], sign, method)
+        have[todo] = True
+    rel, rate = (
+        np.asarray(x)
+        for x in padded_map(
+            lambda p, z, t: _discriminant_rate_padded(model, p, z, t),
             ps[near],
             Z[near],
+            T[near],
             stage="discriminants",
         )
     )
-    runs = [r for r, c in zip(runs, rel < _DOUBLE_ROOT) if c]
-    near = near[rel < _DOUBLE_ROOT]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        zero = -2 * rel / rate  # where sqrt(relative discriminant) reaches zero, from psi
+    beyond = np.array([np.sign(ps[r[0]] - ps[j]) for r, j in zip(runs, near)]) * zero
+    candidate = (rel < _DOUBLE_ROOT) & np.isfinite(beyond) & (beyond > 0)
+    runs = [r for r, c in zip(runs, candidate) if c]
+    near, beyond = near[candidate], beyond[candidate]
     if not runs:
-        return gaits
-    sign = family_sign(family)
-    todo = np.unique(near[~have[near]])
-    if todo.size:
-        T = T.copy()
-        T[todo] = _tangents(model, ps[todo], Z[todo], sign, method)
+        return gaits, T, have
     miss = np.concatenate([np.asarray(r) for r in runs])
     start = np.concatenate([np.full(len(r), j) for r, j in zip(runs, near)])
+    reach = np.concatenate([np.full(len(r), b) for r, b in zip(runs, beyond)])
     step = T[start] * (ps[miss] - ps[start])[:, None]
     guess = Z[start] + step
     again = find_gaits(
@@ -400,7 +424,9 @@ def _other_root(model, ps, gaits, T, have, family, method):
     )
     found = np.asarray(again.result._value) == RESULTS.successful._value
     off = np.abs(np.asarray(jax.vmap(lambda g: _unknowns(g, method))(again)) - guess).max(-1)
-    passed = found & (off <= 0.25 * np.abs(step).max(-1))
+    passed = (
+        found & (off <= 0.25 * np.abs(step).max(-1)) & (reach <= 2 * np.abs(ps[miss] - ps[start]))
+    )
     mask = np.zeros(n, bool)
     k = 0
     for run in runs:
@@ -409,11 +435,11 @@ def _other_root(model, ps, gaits, T, have, family, method):
             mask[run[: hit[0] + 1]] = True
         k += len(run)
     if not mask.any():
-        return gaits
+        return gaits, T, have
     code = jax.vmap(lambda p, r: RESULTS.where(p, RESULTS.other_root, r))(
         jnp.asarray(mask), gaits.result
     )
-    return eqx.tree_at(lambda g: g.result, gaits, code)
+    return eqx.tree_at(lambda g: g.result, gaits, code), T, have
 
 
 def _put(a, idx, values):
