@@ -102,6 +102,14 @@ def test_real_ends_are_reported_with_their_cause():
     assert np.abs(x16[[0, 2]] - (z15[0] + step)).max() < 0.25 * np.abs(step).max()
     shot = vj.find_gait(at16, "stable", "shooting", guess=x16[[0, 2, 3]])
     np.testing.assert_allclose(np.asarray(shot.x_plus), x16, atol=1e-9)
+    # A shooting sweep lands on that gait past the passage (its d is the other root) and
+    # reports the same end.
+    sw = vj.sweep(vj.CompassGait(), np.radians(deg), "unstable", "shooting", tangents=False)
+    assert vj.result_names(sw.gaits.result) == ["successful"] * 3 + ["other_root"]
+    ends = sw.ends()
+    assert [(e["result"], e["isolated"]) for e in ends] == [("other_root", False)]
+    assert "other family ('stable')" in ends[0]["reason"]
+    np.testing.assert_allclose(np.asarray(sw.gaits.x_plus[3]), x16, atol=1e-9)
     # A light hip (1 kg on 5 kg legs): the phi'' ODE of the stable family becomes
     # singular between 4 and 4.5 degrees.
     sw = vj.sweep(
@@ -148,6 +156,20 @@ def test_a_missed_slope_is_retried_from_its_neighbour():
     )
     np.testing.assert_array_equal(np.asarray(again.x_plus), np.asarray(fixed.x_plus))
     assert have.sum() == 1 and not have[1]  # the nearest found neighbour only
+    # A slope missed between two found ones is no end of the family, whatever its code.
+    code = jax.vmap(lambda p, r: vj.RESULTS.where(p, vj.RESULTS.singular_phi_ode, r))(
+        jnp.arange(3) == 1, good.result
+    )
+    hole = _sweep.Sweep(jnp.asarray(psi), eqx.tree_at(lambda g: g.result, good, code))
+    (end,) = hole.ends()
+    assert end["isolated"] and end["result"] == "singular_phi_ode"
+    assert "search failure" in end["reason"] and "phi''" not in end["reason"]
+    code = jax.vmap(lambda p, r: vj.RESULTS.where(p, vj.RESULTS.singular_phi_ode, r))(
+        jnp.arange(3) == 2, good.result
+    )
+    edge = _sweep.Sweep(jnp.asarray(psi), eqx.tree_at(lambda g: g.result, good, code))
+    (end,) = edge.ends()
+    assert not end["isolated"] and "phi''" in end["reason"]
 
 
 def test_heavy_hip_sweep_finds_every_slope():

@@ -68,7 +68,7 @@ class RESULTS(eqx.Enumeration):
     )
     other_root = (
         "At or before this slope the family passes through a double root of the energy "
-        "quadratic (thesis 5.13) and goes on as a gait of the other family (set by VHC "
+        "quadratic (thesis 5.13) and goes on as a gait of the other family (set by "
         "sweeps)."
     )
 

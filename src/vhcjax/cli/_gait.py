@@ -391,6 +391,9 @@ def run_sweep(args):
             s = summary[fam]
             print(f"{fam}: found at {s['found']} of {s['total']} slopes")
             for e in s["ends"]:
+                if e["isolated"]:
+                    print(f"  not found at {e['slope_deg']:.4g} deg: {e['reason']}")
+                    continue
                 print(
                     f"  ends near {e['last_slope_deg']:.4g} deg (next: {e['slope_deg']:.4g} "
                     f"deg): {e['reason']}"

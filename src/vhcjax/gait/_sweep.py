@@ -49,7 +49,9 @@ class Sweep(eqx.Module):
 
     def ends(self):
         """Where the family stops existing or stops being found, as a list of dicts
-        `{"slope_deg", "last_slope_deg", "result", "reason"}` (host side)."""
+        `{"slope_deg", "last_slope_deg", "result", "reason", "isolated"}` (host side),
+        in the order of the slopes given. `isolated`: a missed slope between two found
+        ones, a search failure rather than an end (its `reason` says so)."""
         import numpy as np
 
         from .._results import result_names
@@ -85,15 +87,23 @@ class Sweep(eqx.Module):
                 ),
                 "singular_phi_ode": "the phi'' ODE becomes singular along the arc",
                 "infeasible_uphill": "the solution turned into an uphill (negative-time) one",
+                "other_cycle": (
+                    "the search found a gait of the other family "
+                    f"({_other_family(self.gaits.family)!r}) here"
+                ),
             }.get(names[i], names[i])
             if names[i] == "not_converged" and tan[prev] > _FOLD_TANGENT:
                 reason = f"fold: |dz*/dpsi| = {tan[prev]:.3g} at the last gait found"
+            isolated = 0 < i < len(ok) - 1 and bool(ok[i - 1] and ok[i + 1])
+            if isolated:  # whatever the code claims, the family goes on
+                reason = f"{names[i]}: a search failure; the family is found on both sides"
             out.append(
                 {
                     "slope_deg": float(deg[i]),
                     "last_slope_deg": float(deg[prev]),
                     "result": names[i],
                     "reason": reason,
+                    "isolated": isolated,
                 }
             )
         return out
@@ -200,8 +210,8 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
        differences between anchors.
     4. Slopes the batch missed are retried from their nearest solved slope (its gait and
        tangent), a few rounds.
-    5. (VHC) Missed slopes where the family passes through a double root of (5.13) and
-       goes on as a gait of the other family are coded `other_root`.
+    5. Missed slopes where the family passes through a double root of (5.13) and goes
+       on as a gait of the other family are coded `other_root`.
 
     The slopes may come in any order. `Sweep.ends()` says where and why the family ends.
 
@@ -358,7 +368,7 @@ def _discriminant_rate_padded(model, psis, zs, ts):
 
 def _other_root(model, ps, gaits, T, have, family, method):
     """Code `other_root` the missed slopes where the family passes to the other root of
-    (5.13) (VHC only). Along a family the discriminant $\\Delta$ can fall to zero and rise
+    (5.13). Along a family the discriminant $\\Delta$ can fall to zero and rise
     again: the gait goes on, continuously, as a gait of the other family, and this family
     ends there. A found gait next to a missed slope is a candidate when its relative
     $\\Delta$ is below `_DOUBLE_ROOT` and $\\sqrt{\\Delta}$ (smooth through the passage)
@@ -367,12 +377,13 @@ def _other_root(model, ps, gaits, T, have, family, method):
     tangent prediction. A passage is shown where that search succeeds, closer to the
     prediction than a quarter of the prediction's step, with $\\psi_0$ at most twice as
     far as that slope; the missed slopes up to there (gaits too close to the double root
-    to be solved to 1e-9, or past the passage) are coded with it. **Returns:** the gaits,
-    and the tangents and where they were computed (as `_retry`)."""
+    to be solved to 1e-9, or past the passage) are coded with it. Shooting needs no
+    second search: past the passage its Newton lands on the gait itself, coded
+    `other_cycle` (its $d$ is the other root), and that gait is held to the same tests.
+    **Returns:** the gaits, and the tangents and where they were computed (as
+    `_retry`)."""
     import numpy as np
 
-    if method != "vhc":
-        return gaits, T, have
     ok = np.asarray(gaits.result._value) == RESULTS.successful._value
     n = len(ok)
     runs, near = [], []  # the missed slopes beyond each found gait next to a miss
@@ -419,11 +430,16 @@ def _other_root(model, ps, gaits, T, have, family, method):
     reach = np.concatenate([np.full(len(r), b) for r, b in zip(runs, beyond)])
     step = T[start] * (ps[miss] - ps[start])[:, None]
     guess = Z[start] + step
-    again = find_gaits(
-        model, jnp.asarray(guess), _other_family(family), method, psi=jnp.asarray(ps[miss])
-    )
-    found = np.asarray(again.result._value) == RESULTS.successful._value
-    off = np.abs(np.asarray(jax.vmap(lambda g: _unknowns(g, method))(again)) - guess).max(-1)
+    if method == "vhc":
+        again = find_gaits(
+            model, jnp.asarray(guess), _other_family(family), method, psi=jnp.asarray(ps[miss])
+        )
+        found = np.asarray(again.result._value) == RESULTS.successful._value
+        landed = np.asarray(jax.vmap(lambda g: _unknowns(g, method))(again))
+    else:  # shooting: the gait on the other root, where the sweep's search found it
+        found = np.asarray(gaits.result._value)[miss] == RESULTS.other_cycle._value
+        landed = Z[miss]
+    off = np.abs(landed - guess).max(-1)
     passed = (
         found & (off <= 0.25 * np.abs(step).max(-1)) & (reach <= 2 * np.abs(ps[miss] - ps[start]))
     )
