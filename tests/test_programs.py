@@ -101,11 +101,32 @@ def test_a_new_source_misses(store, monkeypatch):
     for fn in (vj.hybrid.step_map_jit,):
         a = fn(model, z)
         assert counts["exported"] == 1 and len(os.listdir(store)) == 1
-        # the same function after an edit of the library: another key, a new export
+        # the same function in a process that imported an edited library: another key,
+        # a new export
         monkeypatch.setattr(_programs, "_source_hash", "changed source")
+        monkeypatch.setattr(_programs, "_hash_sources", lambda: "changed source")
         b = fn(model, z)
         assert counts["exported"] == 2 and len(os.listdir(store)) == 2
         np.testing.assert_array_equal(np.asarray(a.z_next), np.asarray(b.z_next))
+
+
+def test_sources_edited_after_import_take_the_plain_path(store, monkeypatch):
+    """A process runs the code it imported: once the files on disk differ from it, a
+    program traced now would be stored under the key of the edited files (and a later
+    process would run the old code), and a program stored under the key of the imported
+    ones may come from other code. Neither is stored nor loaded."""
+    counts = _counts(monkeypatch)
+    model, z = vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774])
+    on_disk = _programs._hash_sources
+    monkeypatch.setattr(_programs, "_hash_sources", lambda: "edited since import")
+    a = vj.hybrid.step_map_jit(model, z)
+    assert counts == {"exported": 0, "loaded": 0, "unexportable": 0}
+    assert not os.path.exists(store) or os.listdir(store) == []
+    monkeypatch.setattr(_programs, "_hash_sources", on_disk)
+    _programs._memo.clear()
+    b = vj.hybrid.step_map_jit(model, z)  # sources as imported: stored as usual
+    assert counts["exported"] == 1 and len(os.listdir(store)) == 1
+    np.testing.assert_array_equal(np.asarray(a.z_next), np.asarray(b.z_next))
 
 
 def test_types_from_outside_the_library_are_not_stored(store, monkeypatch):

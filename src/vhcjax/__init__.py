@@ -167,3 +167,10 @@ from .stability import (  # noqa: E402
 )
 
 _enable_default_cache()
+
+# The hash of the sources just imported keys the stored programs (`_programs`): taken
+# now, a source file edited later in this process's life cannot name its old code.
+from ._programs import _source  # noqa: E402
+
+_source()
+del _source

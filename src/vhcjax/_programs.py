@@ -14,7 +14,9 @@ arguments spread over several devices, arguments of types defined outside vhcjax
 libraries it pins (a model class from a notebook could change under the same name),
 static arguments that print differently in every process (a lambda), or the cache turned
 off (`VHCJAX_CACHE_DIR=off`, or `VHCJAX_PROGRAMS=off` for these programs alone) take the
-plain `eqx.filter_jit` path. So does a program that cannot be exported (one holding a
+plain `eqx.filter_jit` path. So do all calls of a process whose vhcjax source files
+changed after it imported vhcjax (an edited checkout, a reloaded module): the key holds
+the hash of the sources taken at import. So does a program that cannot be exported (one holding a
 host callback, e.g. a `throw=True` check): that is remembered, and it is traced the
 usual way.
 
@@ -40,21 +42,28 @@ _lock = threading.RLock()  # reentrant: an export may call another stored functi
 _source_hash = None
 
 
+def _hash_sources():
+    """A hash of the vhcjax source files as they are on disk now."""
+    h = hashlib.sha256()
+    root = os.path.dirname(os.path.abspath(__file__))
+    for dirpath, dirnames, filenames in os.walk(root):
+        dirnames.sort()
+        for name in sorted(filenames):
+            if name.endswith(".py"):
+                path = os.path.join(dirpath, name)
+                h.update(os.path.relpath(path, root).encode())
+                with open(path, "rb") as fh:
+                    h.update(fh.read())
+    return h.hexdigest()
+
+
 def _source():
-    """A hash of the vhcjax sources: a changed source file never loads an old program."""
+    """The hash of the vhcjax sources that this process runs, taken when vhcjax is
+    imported (`vhcjax/__init__.py` calls this last): a changed source file never loads
+    an old program."""
     global _source_hash
     if _source_hash is None:
-        h = hashlib.sha256()
-        root = os.path.dirname(os.path.abspath(__file__))
-        for dirpath, dirnames, filenames in os.walk(root):
-            dirnames.sort()
-            for name in sorted(filenames):
-                if name.endswith(".py"):
-                    path = os.path.join(dirpath, name)
-                    h.update(os.path.relpath(path, root).encode())
-                    with open(path, "rb") as fh:
-                        h.update(fh.read())
-        _source_hash = h.hexdigest()
+        _source_hash = _hash_sources()
     return _source_hash
 
 
@@ -336,7 +345,12 @@ def stored_jit(fn):
 
 def _obtain(fn, path, in_tree, static, leaves):
     """The program stored at `path`, else a new export stored there; `None` if `fn`
-    cannot be exported (its calls then take the plain path)."""
+    cannot be exported, or if the source files changed since vhcjax was imported (its
+    calls then take the plain path): the code this process runs is then not the code
+    that the key names, and a program traced from it must not be stored under that key,
+    nor one stored there be run in its place."""
+    if _hash_sources() != _source():
+        return None
     if os.path.exists(path):
         try:
             program = _load(path)
