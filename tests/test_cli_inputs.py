@@ -191,6 +191,13 @@ def _unwritable_cases(tmp_path):
             if flag == "--animate" and path == folder:
                 continue  # refused for its suffix (tested above)
             cases.append([cmd, *REQUIRED.get(cmd, []), flag, path])
+    for cmd, flag, ext in [
+        ("sweep", "--png", "xyz"),
+        ("multipliers", "--png", "docx"),
+        ("stabilize", "--png", "xyz"),
+        ("slope-sensitivity", "--png", "xyz"),
+    ]:  # a figure format matplotlib does not write
+        cases.append([cmd, *REQUIRED.get(cmd, []), flag, str(tmp_path / f"figure.{ext}")])
     for cmd, flag in [("simulate", "--plots"), ("reproduce", "--out")]:
         for path in ("/proc/vhcjax-test", str(tmp_path / "file")):
             cases.append([cmd, flag, path])

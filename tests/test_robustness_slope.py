@@ -141,3 +141,16 @@ def test_cli_says_when_the_step_budget_decides_the_threshold(capsys):
     # floor steps: the thresholds (well below 1 mm) measure the budget, and it says so
     assert out["max_step_down_m"][1] < 1e-3 and out["max_step_up_m"][1] < 1e-3
     assert "raise --steps" in out["max_step_reason"]
+    assert out["gait_stable"] is True and "gait_stable_reason" not in out
+
+
+def test_cli_says_when_the_gait_is_unstable(capsys):
+    """At 5 degrees the period-1 gait is unstable (past the flip near 4.3): a floor step
+    survived measures the step budget, and the command says so."""
+    from vhcjax.cli import main
+
+    argv = ["slope-sensitivity", "--slope-deg", "5", "--no-derivatives", "--steps", "5"]
+    assert main([*argv, "--heights-mm", "5", "--json", "--quiet"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["gait_stable"] is False and out["gait_spectral_radius"] > 1.0
+    assert "step budget" in out["gait_stable_reason"]

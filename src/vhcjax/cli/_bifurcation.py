@@ -9,6 +9,7 @@ from ._common import (
     ComputationFailed,
     add_model_choice,
     add_model_flags,
+    check_figure_file,
     check_output_file,
     check_slope_deg,
     count,
@@ -109,7 +110,7 @@ def run_multipliers(args):
             "the kneed walker's gaits are found by shooting (its default): drop --method vhc"
         )
     model = walker_from_args(args)
-    check_output_file(args.png, "--png")
+    check_figure_file(args.png, "--png")
     if kneed:  # its one gait family, from the gait at its default slope
         import jax.numpy as jnp
 

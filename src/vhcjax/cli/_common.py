@@ -113,6 +113,22 @@ def check_output_file(path, flag):
         os.remove(path)
 
 
+def check_figure_file(path, flag):
+    """`check_output_file` for a figure: also a suffix that matplotlib writes (none: PNG)."""
+    if path is None:
+        return
+    fmt = os.path.splitext(path)[1].lstrip(".").lower()
+    if fmt:
+        from matplotlib.backend_bases import FigureCanvasBase
+
+        known = FigureCanvasBase.get_supported_filetypes()
+        if fmt not in known:
+            raise CLIError(
+                f"{flag} {path!r}: a figure is written as {', '.join(sorted(known))}, not {fmt!r}"
+            )
+    check_output_file(path, flag)
+
+
 def check_output_dir(path, flag):
     """Create the output folder `path` (and its parents) now and check that a file can be
     written into it, before any work."""

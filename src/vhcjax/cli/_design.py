@@ -8,6 +8,7 @@ from ._common import (
     POSITIVE,
     CLIError,
     add_model_flags,
+    check_figure_file,
     check_finite,
     check_output_file,
     count,
@@ -215,7 +216,7 @@ def run_design(args):
     from ..parameters import design
 
     model = model_from_args(args)
-    check_output_file(args.png, "--png")
+    check_figure_file(args.png, "--png")
     vary = parse_vary(args.vary)
     bounds = parse_bounds(args.bounds, vary)
     if not 1 <= args.steps <= 1000:
@@ -346,7 +347,7 @@ def run_atlas(args):
 
     model_from_args(args, slope_deg=3.0)  # validates the model flags
     check_output_file(args.csv, "--csv")
-    check_output_file(args.png, "--png")
+    check_figure_file(args.png, "--png")
     mu = parse_values(args.mass_ratio, "--mass-ratio")
     beta = parse_values(args.length_ratio, "--length-ratio")
     if args.slope_deg is not None:

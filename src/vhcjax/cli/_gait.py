@@ -11,6 +11,7 @@ from ._common import (
     CLIError,
     add_model_choice,
     add_model_flags,
+    check_figure_file,
     check_output_file,
     check_slope_deg,
     describe,
@@ -321,7 +322,7 @@ def run_sweep(args):
         _check_solved_slope(v)
     model = model_from_args(args, slope_deg=slopes[0])
     check_output_file(args.csv, "--csv")
-    check_output_file(args.png, "--png")
+    check_figure_file(args.png, "--png")
     stability = bool(args.csv or args.json)  # the outputs that show multipliers
     if args.transverse and not stability:
         raise CLIError("--transverse adds multipliers to the --csv or --json output: give one")

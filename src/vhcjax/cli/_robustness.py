@@ -11,7 +11,7 @@ from ._common import (
     ComputationFailed,
     add_model_choice,
     add_model_flags,
-    check_output_file,
+    check_figure_file,
     count,
     describe,
     number,
@@ -242,7 +242,7 @@ def run_contraction(args):
             f"{cells:,} distances (about {cells * 8 / 1e9:.1f} GB); at most "
             f"{MAX_RECOVERY_CELLS:,}"
         )
-    check_output_file(args.png, "--png")
+    check_figure_file(args.png, "--png")
     model, z, _, period, zn = _gait(args)
     c = contraction(
         model,
@@ -323,7 +323,7 @@ def run_basin(args):
             f"memory); at most {MAX_GRID_POINTS:,}: use a coarser grid or several "
             "runs over smaller --half-widths"
         )
-    check_output_file(args.png, "--png")
+    check_figure_file(args.png, "--png")
     model, z, _, period, zn = _gait(args)
     b = basin_slice(
         model,
@@ -412,9 +412,9 @@ def run_slope(args):
 
     from ..robustness import UNDECIDED, gait_sensitivity_norm, max_floor_step, terrain_recovery
 
-    check_output_file(args.png, "--png")
+    check_figure_file(args.png, "--png")
     if args.png:
-        check_output_file(args.png.removesuffix(".png") + "-slope.png", "--png (-slope.png)")
+        check_figure_file(args.png.removesuffix(".png") + "-slope.png", "--png (-slope.png)")
     model, z, x_star, period, zn = _gait(args)
     out = {"gait": zn, "period": period}
     if not args.no_derivatives:
@@ -437,6 +437,14 @@ def run_slope(args):
     g = gait_sensitivity_norm(model, x_star, args.steps)
     out["gait_sensitivity_norm"] = g.norm
     out["dtimes_dh"] = g.dtimes[:10]
+    _stability(
+        args,
+        model,
+        z,
+        out,
+        "even a walker perturbed by rounding leaves it, so the largest floor step survived "
+        "measures the step budget (--steps), not robustness",
+    )
     th = max_floor_step(model, x_star, num_steps=args.steps, progress=_bar(args))
     out["max_step_down_m"] = [th.lo[0], th.hi[0]]
     out["max_step_up_m"] = [th.lo[1], th.hi[1]]
@@ -498,7 +506,7 @@ def run_push(args):
         push_sensitivity_transverse,
     )
 
-    check_output_file(args.png, "--png")
+    check_figure_file(args.png, "--png")
     pushes = args.phases * len(args.directions_deg)
     if pushes > MAX_PUSHES:
         raise CLIError(

@@ -11,8 +11,8 @@ from ._common import (
     ComputationFailed,
     add_model_choice,
     add_model_flags,
+    check_figure_file,
     check_finite,
-    check_output_file,
     count,
     number,
     print_json,
@@ -199,7 +199,7 @@ def _kneed_gait(model):
 
 def run_stabilize(args):
     q, r = _check(args)
-    check_output_file(args.png, "--png")
+    check_figure_file(args.png, "--png")
     import equinox as eqx
     import jax
     import jax.numpy as jnp
