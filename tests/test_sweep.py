@@ -173,10 +173,11 @@ def test_a_missed_slope_is_retried_from_its_neighbour():
 
 
 def test_heavy_hip_sweep_finds_every_slope():
-    """With a hip 1000 times as heavy as a leg the gaits lie within a relative 1e-7 of the
-    edge of the region where (5.13) has real roots, closer than an interpolated guess
-    comes: a guess outside is reflected into the region, and every slope is found."""
-    from vhcjax.gait._problem1 import _into_real_region
+    """With a hip 1000 times as heavy as a leg every gait lies next to a double root of
+    (5.13) in (a, b) (relative discriminant 1e-7); in the search's unknowns (a, h) it
+    lies far from one, and every slope is found, in both families (before, the unstable
+    family's search missed slopes and claimed a singular phi'' ODE at 1.05 degrees)."""
+    from vhcjax.gait._problem1 import _impact_data, _quadratic_h
 
     heavy = vj.CompassGait(mH=5000.0, m1=5.0, m2=5.0)
     deg = np.array([2.5, 2.55, 2.6])
@@ -186,27 +187,38 @@ def test_heavy_hip_sweep_finds_every_slope():
     at = vj.CompassGait(mH=5000.0, m1=5.0, m2=5.0, psi=math.radians(2.5))
     shot = vj.find_gait(at, "stable", "shooting", guess=x[0, [0, 2, 3]])
     np.testing.assert_allclose(np.asarray(shot.x_plus), x[0], atol=1e-9)
-
-    def discriminant(a, b):
-        A, B, C = vj.gait.quadratic_coefficients(at, a, b)
-        return float(B**2 - 4 * A * C), float(B**2)
-
-    # the gait at 2.6 degrees taken as a guess at 2.5: outside, reflected as far inside
-    a, b = x[2, 0], x[2, 2]
-    outside, scale = discriminant(a, b)
-    moved = np.asarray(_into_real_region(at, jnp.array([a, b])))
-    assert -1e-5 < outside / scale < 0 and moved[0] == a and np.sign(moved[1]) == np.sign(b)
-    np.testing.assert_allclose(discriminant(*moved)[0], -outside, rtol=1e-3)
-    inside = np.array([x[0, 0], x[0, 2]])
-    np.testing.assert_array_equal(np.asarray(_into_real_region(at, jnp.asarray(inside))), inside)
+    sw = vj.sweep(heavy, np.radians([1.0, 1.05, 7.1, 7.15]), "unstable", tangents=False)
+    assert vj.result_names(sw.gaits.result) == ["successful"] * 4 and sw.ends() == []
+    for k in (1, 2):
+        x = np.asarray(sw.gaits.x_plus[k])
+        at = vj.CompassGait(mH=5000.0, m1=5.0, m2=5.0, psi=float(sw.psi[k]))
+        shot = vj.find_gait(at, "unstable", "shooting", guess=x[[0, 2, 3]])
+        np.testing.assert_allclose(np.asarray(shot.x_plus), x, atol=1e-9)
+        # the gait's d: next to a double root of (5.13), far from one in (a, h), where
+        # it is the smaller root
+        xm = np.asarray(sw.gaits.x_minus[k])
+        A, B, C = vj.gait.quadratic_coefficients(at, x[0], x[2])
+        assert 0 < (B**2 - 4 * A * C) / B**2 < 1e-6
+        A, B, C = (float(c) for c in _quadratic_h(at, _impact_data(at, x[0]), xm[3]))
+        assert A > 0 and (B**2 - 4 * A * C) / B**2 > 0.5
+        np.testing.assert_allclose(xm[2], (-B - math.sqrt(B**2 - 4 * A * C)) / (2 * A), rtol=1e-9)
+    # a hip 4000 times as heavy: found to a residual of 1e-10, the gait shooting finds
+    heavier = vj.CompassGait(mH=20000.0, m1=5.0, m2=5.0)
+    three = jnp.full(3, math.radians(3.0))
+    g = vj.find_gaits(heavier, jnp.tile(jnp.array([0.2764, -1.0544]), (3, 1)), psi=three)
+    assert vj.result_names(g.result) == ["successful"] * 3 and float(g.residual[0]) < 1e-10
+    x = np.asarray(g.x_plus[0])
+    at = vj.CompassGait(mH=20000.0, m1=5.0, m2=5.0, psi=math.radians(3.0))
+    shot = vj.find_gait(at, "stable", "shooting", guess=x[[0, 2, 3]])
+    np.testing.assert_allclose(np.asarray(shot.x_plus), x, atol=1e-9)
 
 
 def test_no_passage_to_the_other_root_is_claimed_where_the_family_goes_on():
     """A heavy hip's unstable family lies within a relative discriminant of 2.5e-8 of a
-    double root at every slope, and the other family's search near it succeeds; but the
-    discriminant does not head for zero along the family, so a missed slope there is not
-    coded `other_root` (the gaits at 0.95-1.05 degrees exist: found here, confirmed by
-    shooting)."""
+    double root at every slope; the discriminant does not head for zero along the
+    family, so a slope there where the search found a gait of the other family next to
+    the prediction is not coded `other_root` (the gaits at 0.95-1.05 degrees exist:
+    found here, confirmed by shooting)."""
     heavy = vj.CompassGait(mH=5000.0, m1=5.0, m2=5.0)
     deg = np.array([0.95, 1.0, 1.05, 1.1])
     psi = np.radians(deg)
@@ -222,13 +234,15 @@ def test_no_passage_to_the_other_root_is_claimed_where_the_family_goes_on():
     x = np.asarray(good.x_plus[2])
     shot = vj.find_gait(at, "unstable", "shooting", guess=x[[0, 2, 3]])
     np.testing.assert_allclose(np.asarray(shot.x_plus), x, atol=1e-9)
-    code = jax.vmap(lambda p, r: vj.RESULTS.where(p, vj.RESULTS.not_converged, r))(
+    # the gaits at 0.95-1.05 degrees coded as if found on the other root: each lies on
+    # the tangent prediction from 1.1 degrees, and only the discriminant's trend tells
+    code = jax.vmap(lambda p, r: vj.RESULTS.where(p, vj.RESULTS.other_cycle, r))(
         jnp.arange(4) < 3, good.result
     )
     missed = eqx.tree_at(lambda g: g.result, good, code)
     T, have = np.zeros((4, 2)), np.zeros(4, bool)
     kept, _, _ = _sweep._other_root(heavy, psi, missed, T, have, "unstable", "vhc")
-    assert vj.result_names(kept.result) == ["not_converged"] * 3 + ["successful"]
+    assert vj.result_names(kept.result) == ["other_cycle"] * 3 + ["successful"]
     # sqrt of the relative discriminant, extrapolated along the family from 1.1 degrees,
     # reaches zero only tens of degrees away (at 15 degrees on the default model: 15.37)
     z = np.asarray(good.x_plus[3])[[0, 2]]
@@ -237,37 +251,35 @@ def test_no_passage_to_the_other_root_is_claimed_where_the_family_goes_on():
     assert 0 < float(rel[0]) < 1e-7 and abs(math.degrees(-2 * float(rel[0] / rate[0]))) > 10
 
 
-def test_a_guess_without_a_real_root_is_reflected_into_the_region():
-    """For fixed a the discriminant of (5.13) is linear in b^2; on the default model it
-    shrinks as |b| grows (real roots for |b| below about 1.18 at a = 0.2187)."""
-    from vhcjax.gait._problem1 import _into_real_region
+def test_a_guess_without_a_real_root_starts_at_the_vertex():
+    """A guess (a, b) enters the search as (a, h) through its family's root d of (5.13);
+    without a real root, through the vertex -B/2A. On the default model (5.13) has real
+    roots for |b| below about 1.18 at a = 0.2187: from b = -2 the stable gait is found."""
+    from vhcjax.gait._problem1 import _from_search, _impact_data, _to_search
 
     model = vj.CompassGait()
     a = 0.2187
 
     @jax.jit
-    def discriminant(b):
+    def convert(b):
+        ab = jnp.stack([jnp.asarray(a), b])
         A, B, C = vj.gait.quadratic_coefficients(model, a, b)
-        return B**2 - 4 * A * C
+        return (
+            _to_search(model, ab, "stable"),
+            _from_search(model, _to_search(model, ab, "stable")),
+            B**2 - 4 * A * C,
+            -B / (2 * A),
+        )
 
-    def disc(b):
-        return float(discriminant(jnp.asarray(b, float)))
-
-    into = jax.jit(_into_real_region)
-
-    d0 = disc(0.0)
-    moved = float(into(model, jnp.array([a, 1.5]))[1])
-    assert disc(1.5) < 0 and 0 < moved < 1.18
-    np.testing.assert_allclose(disc(moved), -disc(1.5), rtol=1e-9)  # as far inside
-    far = float(into(model, jnp.array([a, -2.0]))[1])  # 2 u_e - u < 0
-    assert far < 0
-    np.testing.assert_allclose(disc(far), d0 / 2, rtol=1e-9)  # u_e / 2
-    guesses = jnp.array([[a, 1.5], [a, -2.0], [a, -1.0], [a, 0.0]])
-    kept = np.asarray(into(model, guesses[2]))  # inside, and b = 0: kept
-    np.testing.assert_array_equal(kept, np.asarray(guesses[2]))
-    np.testing.assert_array_equal(np.asarray(into(model, guesses[3])), [a, 0.0])
-    batch = vj.CompassGait(psi=jnp.full(4, math.radians(3.0)))
-    axes = jax.tree_util.tree_map(lambda x: 0 if jnp.ndim(x) else None, batch)
-    together = eqx.filter_jit(eqx.filter_vmap(_into_real_region, in_axes=(axes, 0)))(batch, guesses)
-    alone = np.stack([np.asarray(into(model, g)) for g in guesses])
-    np.testing.assert_allclose(np.asarray(together), alone, rtol=1e-13)
+    ah, back, disc, vertex = convert(jnp.asarray(-1.0))
+    assert float(disc) > 0
+    np.testing.assert_allclose(np.asarray(back), [a, -1.0], rtol=1e-12)  # round trip
+    ah, _, disc, vertex = convert(jnp.asarray(-2.0))
+    assert float(disc) < 0
+    P = np.asarray(_impact_data(model, jnp.asarray(a)).P)
+    np.testing.assert_allclose(float(ah[1]), (-2.0 - P[0, 0] * float(vertex)) / P[0, 1], rtol=1e-12)
+    three = jnp.full(3, math.radians(3.0))
+    far = vj.find_gaits(model, jnp.tile(jnp.array([a, -2.0]), (3, 1)), psi=three)
+    near = vj.find_gaits(model, jnp.tile(jnp.array([0.2, -1.0]), (3, 1)), psi=three)
+    assert vj.result_names(far.result) == ["successful"] * 3
+    np.testing.assert_allclose(np.asarray(far.x_plus), np.asarray(near.x_plus), atol=1e-10)

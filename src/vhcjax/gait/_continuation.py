@@ -62,7 +62,7 @@ def _continue(start, end, s_buf, n, z0, sign, method, s_prev=None, z_prev=None):
     `s_buf[0]`, with a secant predictor: the line through the last two points solved,
     the first of them `(s_prev, z_prev)` if given (the first step from the seed alone
     starts at the seed). A failed point does not move the line: the next one is
-    predicted from the last two successes.
+    predicted from the last two gaits found (of either family).
 
     The search is traced once, into a jaxpr (`jax.closure_convert`): the buffer's shapes
     come from it and the loop replays it (tracing it again for the shapes alone would
@@ -72,7 +72,10 @@ def _continue(start, end, s_buf, n, z0, sign, method, s_prev=None, z_prev=None):
     """
     path = _path(start, end)
     s0 = s_buf[0]
-    search, consts = jax.closure_convert(lambda s, z: _search(path(s), z, sign, method), s0, z0)
+    # every guess a prediction next to the last gait: Newton in (a, h) throughout (VHC)
+    search, consts = jax.closure_convert(
+        lambda s, z: _search(path(s), z, sign, method, far=jnp.inf), s0, z0
+    )
     shape = jax.eval_shape(search, s0, z0, *consts)
     buf = jax.tree_util.tree_map(lambda l: jnp.zeros((s_buf.shape[0],) + l.shape, l.dtype), shape)
 
@@ -81,7 +84,9 @@ def _continue(start, end, s_buf, n, z0, sign, method, s_prev=None, z_prev=None):
         s = s_buf[i]
         slope = jnp.where(s_good != s_prev, (z_good - z_prev) / (s_good - s_prev), 0.0)
         gait = search(s, z_good + slope * (s - s_good), *consts)
-        ok = gait.result == RESULTS.successful
+        # a gait of the other family (its d the other root of 5.13) lies on the same
+        # curve of gaits, past a double root: it carries the predictor too
+        ok = (gait.result == RESULTS.successful) | (gait.result == RESULTS.other_cycle)
         z_new = _unknowns(gait, method)
         buf = jax.tree_util.tree_map(lambda b, v: b.at[i].set(v), buf, gait)
         # a point equal to the last success (the seed re-solved) keeps the older one
@@ -137,7 +142,10 @@ def _run_continuation(start, end, s_values, z0, sign, method):
         gaits = jax.tree_util.tree_map(lambda x: x[skip:k], jax.device_get(out))
         parts.append(gaits)
         # the last two successes so far carry the secant line into the next call
-        ok = np.flatnonzero(np.asarray(gaits.result._value) == RESULTS.successful._value)
+        code = np.asarray(gaits.result._value)
+        ok = np.flatnonzero(
+            (code == RESULTS.successful._value) | (code == RESULTS.other_cycle._value)
+        )
         solved = [(s_prev, z_prev), (s_start, z_start)] + [
             (new[i], np.asarray(_unknowns(jax.tree_util.tree_map(lambda x: x[i], gaits), method)))
             for i in ok[-2:]

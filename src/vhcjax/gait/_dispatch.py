@@ -7,9 +7,11 @@ from ._problem1 import vhc_search
 from ._shooting import shooting_search
 
 
-def _search(model, guess, sign, method, solver="newton", chord=False, axes=None):
+def _search(model, guess, sign, method, solver="newton", chord=False, axes=None, far=None):
+    """`far`: VHC only (see `vhc_search`); `None`: its default."""
     if method == "vhc":
-        return vhc_search(model, guess, sign, solver=solver, chord=chord, axes=axes)
+        kw = {} if far is None else {"far": far}
+        return vhc_search(model, guess, sign, solver=solver, chord=chord, axes=axes, **kw)
     if method == "shooting":
         return shooting_search(
             model,

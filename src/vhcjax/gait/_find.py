@@ -16,7 +16,7 @@ from ._continuation import _HOMOTOPY_STEPS, _continue, _seed, _unknowns, continu
 from ._derivatives import with_derivatives
 from ._dispatch import _check, _relabel, _search, reference_model
 from ._gait import _NOISY_RESIDUAL, family_sign
-from ._problem1 import _with_psi
+from ._problem1 import _FAR, _with_psi
 
 
 def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newton", throw=True):
@@ -131,17 +131,17 @@ def _batched_axes(model):
 
 
 @stored_jit
-def _search_batch(model, guesses, sign, method, solver, axes, chord):
-    return _search(model, guesses, sign, method, solver, chord, axes)
+def _search_batch(model, guesses, sign, method, solver, axes, chord, far):
+    return _search(model, guesses, sign, method, solver, chord, axes, far)
 
 
 @stored_jit
-def _search_single(model, guesses, sign, method, solver, chord):
+def _search_single(model, guesses, sign, method, solver, chord, far):
     """`_search` on a batch of one member, unbatched inside."""
     one = jax.tree_util.tree_map(
         lambda x: x[0] if (eqx.is_array(x) and jnp.ndim(x) > 0) else x, model
     )
-    gait = _search(one, guesses[0], sign, method, solver, chord)
+    gait = _search(one, guesses[0], sign, method, solver, chord, far=far)
     return jax.tree_util.tree_map(lambda x: x[None], gait)
 
 
@@ -166,6 +166,7 @@ def find_gaits(
     solver="newton",
     mesh=None,
     chord=None,
+    far=None,
     vectorise=None,
 ):
     """Batched `find_gait` over guesses, slopes and model parameters; never raises.
@@ -180,6 +181,8 @@ def find_gaits(
     - `mesh`: a `jax.sharding.Mesh` with a `"batch"` axis; default: all local devices.
     - `chord`: with `guesses`, finish Newton with chord steps (see `vhc_search`).
       `None` (default): where a device holds 64 or more members.
+    - `far`: VHC, with `guesses`: see `vhc_search` (`None`: its default; `inf` for
+      guesses predicted next to a gait, as `sweep` makes them).
     - `vectorise`: ignored (every batch is one vectorised Newton loop); kept so that
       existing calls still run.
 
@@ -209,11 +212,12 @@ def find_gaits(
     params, model = model, detach(model)  # the search itself is never differentiated
     if guesses is not None:
         guesses = detach(guesses)
-    gaits = _find_gaits(model, guesses, family, method, solver, mesh, chord)
+    gaits = _find_gaits(model, guesses, family, method, solver, mesh, chord, far)
     return with_derivatives(params, gaits, method, family_sign(family))
 
 
-def _find_gaits(model, guesses, family, method, solver, mesh, chord):
+def _find_gaits(model, guesses, family, method, solver, mesh, chord, far=None):
+    far = np.asarray(_FAR if far is None else far, float)  # an argument, not a constant
     sizes = [
         jnp.shape(x)[0]
         for x in jax.tree_util.tree_leaves(model)
@@ -233,7 +237,7 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord):
         )
     sign = family_sign(family)
     if B == 1 and guesses is not None:  # one member: no batching to trace or run
-        gaits = _search_single(model, guesses, sign, method, solver, bool(chord))
+        gaits = _search_single(model, guesses, sign, method, solver, bool(chord), far)
         return _clean_failed(_relabel(gaits, family), guesses, B)
     # one member (a homotopy, no guess) runs alone: a padded batch would repeat its work
     chunk = 1 if B == 1 else _chunk_size(B, host_workers(mesh), mesh)
@@ -250,17 +254,17 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord):
         axes = _batched_axes(m)
         if g is None:
             return _from_reference_batch(m, sign, method, _HOMOTOPY_STEPS, axes)
-        return _search_batch(m, g, sign, method, solver, axes, bool(chord))
+        return _search_batch(m, g, sign, method, solver, axes, bool(chord), far)
 
     gaits = padded_map(search, batched, guesses, max_chunk=chunk, mesh=mesh, stage="gait search")
     gaits = _relabel(gaits, family)
     concrete = not isinstance(gaits.result._value, jax.core.Tracer)  # not under `jit`
     if chord and guesses is not None and concrete:
-        gaits = _redo_without_chord(gaits, batched, shared, family, method, solver, mesh)
+        gaits = _redo_without_chord(gaits, batched, shared, family, method, solver, mesh, far)
     return _clean_failed(gaits, guesses, B)
 
 
-def _redo_without_chord(gaits, batched, shared, family, method, solver, mesh):
+def _redo_without_chord(gaits, batched, shared, family, method, solver, mesh, far):
     """Members a chord finish left `not_converged` with a residual below 1e-8 are solved
     again, with Newton steps, from where they stopped: a residual that rounds above
     `SUCCESS_TOL` (a heavy hip) needs Newton's error estimate to be accepted, and the
@@ -273,7 +277,9 @@ def _redo_without_chord(gaits, batched, shared, family, method, solver, mesh):
         return gaits
     params = jax.tree_util.tree_map(lambda x: jnp.asarray(x)[redo], batched)
     start = np.asarray(jax.vmap(lambda g: _unknowns(g, method))(gaits))[redo]
-    again = _find_gaits(eqx.combine(params, shared), start, family, method, solver, mesh, False)
+    again = _find_gaits(
+        eqx.combine(params, shared), start, family, method, solver, mesh, False, far
+    )
     return jax.tree_util.tree_map(lambda a, b: jnp.asarray(a).at[redo].set(b), gaits, again)
 
 

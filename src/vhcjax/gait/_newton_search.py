@@ -15,19 +15,34 @@ def _evaluate_batch(evaluate, config, axes, model, X, T, family):
     return eqx.filter_vmap(member, in_axes=(axes, 0, 0))(model, X, T)
 
 
-def _newton_search(evaluate, config, family, finish, model, x0, axes, chord, **newton):
+def _newton_search(evaluate, config, family, finish, model, x0, axes, chord, chart=None, **newton):
     """`damped_newton` on one member (`axes=None`) or `damped_newton_batch` on a batch
     (`model` batched along `axes`, `x0`: `(B, n)`) of `evaluate(model, x, family, config, tol)`;
     `finish(model, x, r, aux, iterations, error) -> Gait` is written for one member
-    (`error`: Newton's estimate of the error of `x`)."""
+    (`error`: Newton's estimate of the error of `x`). `chart = (to_y(model, x),
+    from_y(model, y, x), use_y(model, y, r))`: `damped_newton`'s chart, written for one member."""
     newton["chord_below"] = _CHORD_BELOW if chord else None
     if axes is None:
 
         def member(x, tol):
             return evaluate(model, x, family, config, tol)
 
+        if chart is not None:
+            to_y, from_y, use_y = chart
+            newton["chart"] = (
+                lambda x: to_y(model, x),
+                lambda y, x: from_y(model, y, x),
+                lambda y, r: use_y(model, y, r),
+            )
         return finish(model, *damped_newton(member, x0, **newton))
     fn = lambda X, T: _evaluate_batch(evaluate, config, axes, model, X, T, family)  # noqa: E731
+    if chart is not None:
+        to_y, from_y, use_y = chart
+        newton["chart"] = (
+            lambda X: eqx.filter_vmap(to_y, in_axes=(axes, 0))(model, X),
+            lambda Y, X: eqx.filter_vmap(from_y, in_axes=(axes, 0, 0))(model, Y, X),
+            lambda Y, R: eqx.filter_vmap(use_y, in_axes=(axes, 0, 0))(model, Y, R),
+        )
     out = damped_newton_batch(fn, x0, **newton)
     return eqx.filter_vmap(finish, in_axes=(axes, 0, 0, 0, 0, 0))(model, *out)
 

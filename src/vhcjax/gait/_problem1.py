@@ -14,6 +14,17 @@ $c$ (fixed endpoints, no event), carrying the time $dt/d\\theta = 1/\\dot\\theta
 residual of (5.20), $(\\phi(c) - g, \\phi'(c) - h/d)$, is driven to zero by Newton's
 method (forward-mode Jacobian) or, optionally, by an optax optimiser on its square.
 
+The search itself runs in the unknowns $(a, h)$, $h = \\dot q_2^-$: with $a$ and $h$
+fixed, $b = P_{11} d + P_{12} h$ and $f = P_{21} d + P_{22} h$ are linear in $d$, the
+energy balance is again a quadratic in $d$, and the gait's $d$ is its smaller root for
+both families. In $(a, b)$ the residual has a square-root branch where (5.13) has a
+double root, and gaits lie close to one (a hip 1000 times as heavy as a leg: relative
+discriminant $10^{-8}$; a family that passes from one root to the other), and
+$h = (b - P_{11} d)/P_{12}$ divides by a small $P_{12}$ for a heavy hip; in $(a, h)$
+the gaits tried lie at relative discriminants above 0.5. Guesses and results stay in
+$(a, b)$; the gait found is labelled with its root of (5.13) (`other_cycle` where that
+is not the `family` asked for).
+
 **Shooting** (Problem 2): Newton on the step-to-step map of the hybrid simulation on
 the post-impact section (`vhcjax.hybrid.fixed_point`).
 
@@ -97,8 +108,12 @@ def velocity_relations(model, a, b, d):
     return _relations(_impact_data(model, a), b, d)
 
 
-def _states_from(data, b, d):
-    f, h = _relations(data, b, d)
+def _states_from(data, b, d, h=None):
+    """Post- and pre-impact states from $b, d$ (5.9), or from $d, h$ with $b$ given by them."""
+    if h is None:
+        f, h = _relations(data, b, d)
+    else:
+        f = data.P[1, 0] * d + data.P[1, 1] * h
     x_plus = jnp.concatenate([data.q_plus, jnp.stack([b, f])])
     x_minus = jnp.concatenate([data.q_minus, jnp.stack([d, h])])
     return x_plus, x_minus
@@ -135,31 +150,6 @@ def _solve_for_d(model, data, b, family):
     disc = B**2 - 4 * A * C
     root = jnp.sqrt(jnp.maximum(disc, 0.0))
     return (-B + sign * root) / (2 * A), disc >= 0
-
-
-def _into_real_region(model, ab):
-    """$(a, b)$ moved into the region where (5.13) has real roots, if it lies outside.
-
-    For fixed $a$ the energy gap is a quadratic form in $(b, d)$ plus a constant (the
-    velocities (5.9) are linear in $b, d$), so the discriminant of (5.13) is linear in
-    $u = b^2$: $\\Delta(u) = \\Delta(0) + k u$. A guess with $\\Delta < 0$ is reflected
-    across the edge $u_e = -\\Delta(0)/k$ to $2u_e - u$, as far inside as it was outside
-    ($u_e/2$ if that is negative), keeping the sign of $b$. Outside the region the
-    residual is a constant that Newton cannot leave, and gaits lie close to the edge: a
-    heavy hip's within a relative $10^{-7}$, and a family near the slope where it passes
-    to the other root of (5.13) closer still. A guess inside the region, or where no
-    edge exists, is kept."""
-    a, b = ab[0], ab[1]
-    data = _impact_data(model, a)
-    (A, B, C), (A0, B0, C0) = (_quadratic(model, data, x) for x in (b, jnp.zeros_like(b)))
-    disc, disc0 = B**2 - 4 * A * C, B0**2 - 4 * A0 * C0
-    u = b**2
-    k = (disc - disc0) / jnp.where(u > 0, u, 1.0)
-    u_edge = -disc0 / jnp.where(k != 0, k, 1.0)
-    u_new = jnp.where(2 * u_edge - u > 0, 2 * u_edge - u, 0.5 * u_edge)
-    move = (disc < 0) & (u > 0) & (k != 0) & (u_edge > 0) & jnp.isfinite(u_new)
-    b_new = jnp.sign(b) * jnp.sqrt(jnp.where(move, u_new, 1.0))
-    return jnp.stack([a, jnp.where(move, b_new, b)])
 
 
 class BoundaryData(eqx.Module):
@@ -237,11 +227,12 @@ def vhc_boundary(model, ab, family, config=VHC_CONFIG):
     return _boundary_abd(model, data, a, b, d, real, config)
 
 
-def _boundary_abd(model, data, a, b, d, real, config):
-    """`vhc_boundary` for a given $d$ (not necessarily a root of 5.13)."""
+def _boundary_abd(model, data, a, b, d, real, config, h=None):
+    """`vhc_boundary` for a given $d$ (not necessarily a root of 5.13); with `h`, the
+    pre-impact $\\dot q_2$ given too (`b` must equal $P_{11} d + P_{12} h$)."""
     real = jnp.asarray(real)
     d = jnp.where(real, d, -1.0)  # keep the arithmetic finite on failure
-    x_plus, x_minus = _states_from(data, b, d)
+    x_plus, x_minus = _states_from(data, b, d, h)
     E0 = model.energy(x_plus)
     n = model.n_dof
     e, f = x_plus[1], x_plus[n + 1]
@@ -314,7 +305,94 @@ def vhc_residual(model, ab, family, config=VHC_CONFIG):
     return _vhc_eval(model, ab, family, config)[0]
 
 
+# ---------------------------------------------------------------------------------------
+# The search's unknowns: (a, h)
+# ---------------------------------------------------------------------------------------
+def _quadratic_h(model, data, h):
+    """$(A', B', C')$ of the energy gap as a quadratic in $d$ with $a$ and the pre-impact
+    $h = \\dot q_2^-$ fixed: $b = P_{11} d + P_{12} h$, $f = P_{21} d + P_{22} h$ (5.7)."""
+    ds = jnp.array([-1.0, 0.0, 1.0]) * jnp.ones_like(jnp.asarray(h, dtype=float))
+
+    def gap(d):
+        x_plus, x_minus = _states_from(data, data.P[0, 0] * d + data.P[0, 1] * h, d, h)
+        return model.energy(x_minus) - model.energy(x_plus)
+
+    fm, f0, fp = jax.vmap(gap)(ds)
+    return 0.5 * (fp + fm) - f0, 0.5 * (fp - fm), f0
+
+
+def _to_search(model, ab, family):
+    """The search's unknowns $(a, h)$ of a guess $(a, b)$: $d$ is the `family` root of
+    (5.13) (`family` may be its sign), $h = (b - P_{11} d)/P_{12}$; where (5.13) has no
+    real root, $d$ is the vertex $-B/2A$."""
+    a, b = ab[0], ab[1]
+    data = _impact_data(model, a)
+    A, B, C = _quadratic(model, data, b)
+    disc = B**2 - 4 * A * C
+    root = jnp.sqrt(jnp.where(disc > 0, disc, 0.0))
+    d = (-B + family_sign(family) * root) / (2 * A)
+    P = data.P
+    return jnp.stack([a, (b - P[0, 0] * d) / P[0, 1]])
+
+
+def _to_search_near(model, ab, ah):
+    """The search's unknowns $(a, h)$ of $(a, b)$ (a step in $(a, b)$ from `ah`), through
+    the root of (5.13) nearer to the $d$ of `ah`; NaN where (5.13) has no real root."""
+    a, b = ab[0], ab[1]
+    data = _impact_data(model, a)
+    A, B, C = _quadratic(model, data, b)
+    disc = B**2 - 4 * A * C
+    root = jnp.sqrt(jnp.where(disc > 0, disc, 0.0))
+    d_now, _ = _smaller_root(_quadratic_h(model, _impact_data(model, ah[0]), ah[1]))
+    lo, hi = (-B - root) / (2 * A), (-B + root) / (2 * A)
+    d = jnp.where(jnp.abs(hi - d_now) < jnp.abs(lo - d_now), hi, lo)
+    P = data.P
+    return jnp.where(disc < 0, jnp.nan, jnp.stack([a, (b - P[0, 0] * d) / P[0, 1]]))
+
+
+def _from_search(model, ah):
+    """$(a, b)$ of the search's unknowns $(a, h)$ (see `_vhc_eval_h`)."""
+    a, h = ah[0], ah[1]
+    data = _impact_data(model, a)
+    d, _ = _smaller_root(_quadratic_h(model, data, h))
+    return jnp.stack([a, data.P[0, 0] * d + data.P[0, 1] * h])
+
+
+def _smaller_root(coefficients):
+    A, B, C = coefficients
+    disc = B**2 - 4 * A * C
+    real = disc >= 0
+    return (-B - jnp.sqrt(jnp.where(real, disc, 0.0))) / (2 * A), real
+
+
+#: Residual (max-norm) above which the VHC search steps in (a, b), below it in (a, h)...
+_FAR = 1e-2
+#: ... and relative discriminant of (5.13) in (a, b) above which it does: next to a
+#: double root the steps in (a, b) meet its square-root branch.
+_FAR_DISCRIMINANT = 1e-3
+
+
+def _vhc_eval_h(model, ah, family, config=VHC_CONFIG, tol=None):
+    """Problem 1's residual (5.20) and boundary data in the unknowns $(a, h)$: $d$ is the
+    smaller root of the energy quadratic in $d$ at fixed $(a, h)$ (`_quadratic_h`; its
+    $A' > 0$, as the impact dissipates), then $b = P_{11} d + P_{12} h$. In these
+    unknowns the gaits lie far from a double root (relative discriminant above 0.5 for
+    every model tried, against $10^{-8}$ in $(a, b)$ for a heavy hip), nothing divides
+    by $P_{12}$, and a family passes through a double root of (5.13) in $(a, b)$ without
+    a branch point. The gait's `family` (its root of (5.13) in $(a, b)$) is checked at
+    the end (`_finish_vhc`)."""
+    del family  # the gait's d is the smaller root for both families
+    a, h = ah[0], ah[1]
+    data = _impact_data(model, a)
+    d, real = _smaller_root(_quadratic_h(model, data, h))
+    b = data.P[0, 0] * d + data.P[0, 1] * h
+    bd = _boundary_abd(model, data, a, b, d, real, _with_tolerance(config, tol), h)
+    r = jnp.where(bd.result == RESULTS.successful, bd.residual, 1e3 * jnp.ones(2))
+    return r, bd
+
+
 def _finish_vhc(model, bd, iterations, solver_ok, family, error=jnp.inf):
+    """The `Gait` of a (mirrored, see `vhc_search`) search, before `_unmirror`."""
     res = jnp.max(jnp.abs(bd.residual))
     converged = solver_ok & accepted(res, error)
     code = RESULTS.where(
@@ -323,8 +401,47 @@ def _finish_vhc(model, bd, iterations, solver_ok, family, error=jnp.inf):
         RESULTS.where(converged, RESULTS.successful, RESULTS.not_converged),
     )
     res = jnp.where(bd.result == RESULTS.successful, res, jnp.inf)
+    # the impact is checked by `_unmirror`, on the gait walking the guess's way
     return _make_gait(
-        model, bd.x_plus, bd.x_minus, bd.T, bd.E0, iterations, res, code, _label(family), "vhc"
+        model,
+        bd.x_plus,
+        bd.x_minus,
+        bd.T,
+        bd.E0,
+        iterations,
+        res,
+        code,
+        _label(family),
+        "vhc",
+        jnp.asarray(True),
+    )
+
+
+def _unmirror(model, gait, up, family):
+    """A gait searched mirrored (`up`: every velocity reversed, see `vhc_search`) turned
+    back, its impact checked (`_make_gait`), and labelled with its root of (5.13) in
+    $(a, b)$: `other_cycle` where that is not `family`'s."""
+    n = model.n_dof
+    s = jnp.where(up, -1.0, 1.0)
+    flip = jnp.concatenate([jnp.ones(n), jnp.full(n, s)])
+    x_plus, x_minus = gait.x_plus * flip, gait.x_minus * flip
+    a, b, d = x_plus[0], x_plus[n], x_minus[n]
+    A, B, C = quadratic_coefficients(model, a, b)
+    other = (B**2 - 4 * A * C >= 0) & (family_sign(family) * (2 * A * d + B) < 0)
+    code = RESULTS.where(
+        (gait.result == RESULTS.successful) & other, RESULTS.other_cycle, gait.result
+    )
+    return _make_gait(
+        model,
+        x_plus,
+        x_minus,
+        s * gait.T,
+        gait.E0,
+        gait.iterations,
+        gait.residual,
+        code,
+        _label(family),
+        "vhc",
     )
 
 
@@ -340,14 +457,19 @@ def vhc_search(
     config=VHC_CONFIG,
     chord=False,
     axes=None,
+    far=_FAR,
 ):
     """Solve thesis Problem 1 for $(a, b)$ from `guess` (pure; never raises).
 
     **Arguments:**
 
     - `model`: a two-DOF `WalkerModel` (e.g. `CompassGait`).
-    - `guess`: $(a_0, b_0)$; one outside the region where (5.13) has real roots is first
-      reflected into it (`_into_real_region`).
+    - `guess`: $(a_0, b_0)$. The search runs in the unknowns $(a, h)$ (`_vhc_eval_h`):
+      the guess enters with $d$ its `family` root of (5.13) (the vertex $-B/2A$ where
+      (5.13) has no real root), and the gait found is checked to be of that family
+      (`other_cycle` if its $d$ is the other root). A guess with $b_0 > 0$ (walking
+      uphill, 7.17) is searched mirrored: every velocity reversed, which leaves the
+      residual unchanged.
     - `family`: `"stable"` (thesis selector 2) or `"unstable"` (selector 1).
     - `solver`: `"newton"` (default: `damped_newton`, forward-mode Jacobian, steps
       damped Levenberg-Marquardt style where a full step fails), `"lm"` (optimistix's
@@ -359,6 +481,11 @@ def vhc_search(
     - `chord`: `"newton"` only: finish with chord steps (`damped_newton`'s
       `chord_below`): in large batches 1.6x the throughput, for one more compiled
       evaluation (1.5-2.2 s more to compile).
+    - `far`: `"newton"` only: from points with a residual (max-norm) above `far` and a
+      relative discriminant of (5.13) above $10^{-3}$ the steps are taken in $(a, b)$,
+      the unknowns of the thesis, in which a guess far from the gait, such as the thesis
+      seeds, is led in; elsewhere in $(a, h)$. `inf`: in $(a, h)$ throughout, for
+      guesses predicted next to a gait (continuation, sweeps). May be traced.
     - `axes`: searches a batch. `guess` is then `(B, 2)` and `axes` gives the batch axis
       of each of `model`'s leaves (`0` or `None`, as `jax.vmap`'s `in_axes`). With
       `"newton"` one loop iterates every member (`damped_newton_batch`).
@@ -379,34 +506,56 @@ def vhc_search(
             config=config,
         )
     ab0 = jnp.asarray(guess, dtype=float)[..., :2]
+    # The residual is even in the velocities: a guess walking uphill (b > 0, thesis 7.17)
+    # is searched mirrored, downhill, where its family's root is the other one.
+    up = ab0[..., 1] > 0
+    ab0 = ab0 * jnp.stack([jnp.ones(up.shape), jnp.where(up, -1.0, 1.0)], axis=-1)
+    signs = family_sign(family) * jnp.where(up, -1.0, 1.0)
     if axes is None:
-        ab0 = _into_real_region(model, ab0)
+        x0 = _to_search(model, ab0, signs)
     else:
-        ab0 = eqx.filter_vmap(_into_real_region, in_axes=(axes, 0))(model, ab0)
-    res_fn = lambda ab: vhc_residual(model, ab, family, config)  # noqa: E731
+        x0 = eqx.filter_vmap(_to_search, in_axes=(axes, 0, 0))(model, ab0, signs)
+    # A guess that maps to no finite (a, h) (b = 0, or P12 = 0) is searched from (a, 0).
+    x0 = jnp.where(jnp.isfinite(x0), x0, jnp.zeros_like(x0))
+    res_fn = lambda x: _vhc_eval_h(model, x, family, config)[0]  # noqa: E731
     if solver == "newton":
-        return _vhc_newton(
-            model, ab0, family, config, chord, axes, rtol=rtol, atol=atol, max_steps=max_steps
-        )
-    if solver == "lm":
-        ab, iters = levenberg_marquardt(res_fn, ab0, rtol, atol, 4 * max_steps)
-    elif solver == "optimistix":
-        sol = optx.root_find(
-            lambda ab, _: res_fn(ab),
-            optx.Newton(rtol=rtol, atol=atol),
-            ab0,
+        gait = _vhc_newton(
+            model,
+            x0,
+            family,
+            config,
+            chord,
+            axes,
+            rtol=rtol,
+            atol=atol,
             max_steps=max_steps,
-            throw=False,
+            far=far,
         )
-        ab, iters = sol.value, sol.stats["num_steps"]
-    elif solver == "optax":
-        ab, iters = optax_minimise(res_fn, ab0, max_steps=20 * max_steps)
     else:
-        raise ValueError(f"solver must be 'newton', 'lm', 'optimistix' or 'optax', got {solver!r}")
-    finite = jnp.isfinite(ab).all()
-    ab = jnp.where(finite, ab, ab0)
-    bd = vhc_boundary(model, ab, family, config)
-    return _finish_vhc(model, bd, iters, finite, family)
+        if solver == "lm":
+            x, iters = levenberg_marquardt(res_fn, x0, rtol, atol, 4 * max_steps)
+        elif solver == "optimistix":
+            sol = optx.root_find(
+                lambda x, _: res_fn(x),
+                optx.Newton(rtol=rtol, atol=atol),
+                x0,
+                max_steps=max_steps,
+                throw=False,
+            )
+            x, iters = sol.value, sol.stats["num_steps"]
+        elif solver == "optax":
+            x, iters = optax_minimise(res_fn, x0, max_steps=20 * max_steps)
+        else:
+            raise ValueError(
+                f"solver must be 'newton', 'lm', 'optimistix' or 'optax', got {solver!r}"
+            )
+        finite = jnp.isfinite(x).all()
+        x = jnp.where(finite, x, x0)
+        bd = _vhc_eval_h(model, x, family, config)[1]
+        gait = _finish_vhc(model, bd, iters, finite, family)
+    if axes is None:
+        return _unmirror(model, gait, up, family)
+    return eqx.filter_vmap(_unmirror, in_axes=(axes, 0, 0, None))(model, gait, up, family)
 
 
 def _vhc_newton(
@@ -419,10 +568,17 @@ def _vhc_newton(
     rtol=1e-11,
     atol=1e-11,
     max_steps=50,
+    far=_FAR,
 ):
     """`vhc_search` with `solver="newton"`."""
+
+    def use_ab(m, ab, r):  # far from the gait, and from a double root of (5.13)
+        A, B, C = quadratic_coefficients(m, ab[0], ab[1])
+        return (jnp.max(jnp.abs(r)) > far) & (B**2 - 4 * A * C > _FAR_DISCRIMINANT * B**2)
+
+    chart = (_from_search, _to_search_near, use_ab)
     return _newton_search(
-        _vhc_eval,
+        _vhc_eval_h,
         config,
         family,
         lambda m, ab, r, bd, k, err: _finish_vhc(m, bd, k, jnp.isfinite(ab).all(), family, err),
@@ -435,4 +591,5 @@ def _vhc_newton(
         max_steps=max_steps,
         tolerances=(_LOOSE_TOL, config.rtol),
         residual_cap=_RESIDUAL_CAP,
+        chart=chart,
     )

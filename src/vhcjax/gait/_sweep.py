@@ -263,7 +263,9 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
         ta = _anchor_slopes(pa, za)
         # 3. every slope at once
         guesses = _hermite(ps, pa, za, ta)
-        gaits = find_gaits(model, jnp.asarray(guesses), family, method, psi=jnp.asarray(ps))
+        gaits = find_gaits(
+            model, jnp.asarray(guesses), family, method, psi=jnp.asarray(ps), far=math.inf
+        )
         gaits, tangent, have = _retry(model, ps, gaits, family, method, sign, anchor_step, tangents)
         gaits, tangent, have = _other_root(model, ps, gaits, tangent, have, family, method)
     # 6. the tangents still wanted: all of them, or those next to a missed slope (a fold?)
@@ -324,7 +326,9 @@ def _retry(model, ps, gaits, family, method, sign, reach, all_tangents=True):
             T[todo] = _tangents(model, ps[todo], Z[todo], sign, method)
             have[todo] = True
         guess = Z[near] + T[near] * (ps[miss] - ps[near])[:, None]
-        again = find_gaits(model, jnp.asarray(guess), family, method, psi=jnp.asarray(ps[miss]))
+        again = find_gaits(
+            model, jnp.asarray(guess), family, method, psi=jnp.asarray(ps[miss]), far=math.inf
+        )
         found = np.asarray(again.result._value) == RESULTS.successful._value
         if not found.any():
             break
@@ -372,16 +376,13 @@ def _other_root(model, ps, gaits, T, have, family, method):
     again: the gait goes on, continuously, as a gait of the other family, and this family
     ends there. A found gait next to a missed slope is a candidate when its relative
     $\\Delta$ is below `_DOUBLE_ROOT` and $\\sqrt{\\Delta}$ (smooth through the passage)
-    extrapolated along the family reaches zero beyond it, at $\\psi_0$. The first
-    `_PASSAGE_RUN` missed slopes beyond it are searched with the other root from its
-    tangent prediction. A passage is shown where that search succeeds, closer to the
+    extrapolated along the family reaches zero beyond it, at $\\psi_0$. Past the passage
+    the sweep's search lands on the gait itself, coded `other_cycle` (its $d$ is the
+    other root). A passage is shown at the first of the `_PASSAGE_RUN` missed slopes
+    beyond the candidate where that gait lies closer to the candidate's tangent
     prediction than a quarter of the prediction's step, with $\\psi_0$ at most twice as
-    far as that slope; the missed slopes up to there (gaits too close to the double root
-    to be solved to 1e-9, or past the passage) are coded with it. Shooting needs no
-    second search: past the passage its Newton lands on the gait itself, coded
-    `other_cycle` (its $d$ is the other root), and that gait is held to the same tests.
-    **Returns:** the gaits, and the tangents and where they were computed (as
-    `_retry`)."""
+    far as that slope; the missed slopes up to there are coded with it. **Returns:** the
+    gaits, and the tangents and where they were computed (as `_retry`)."""
     import numpy as np
 
     ok = np.asarray(gaits.result._value) == RESULTS.successful._value
@@ -430,16 +431,9 @@ def _other_root(model, ps, gaits, T, have, family, method):
     reach = np.concatenate([np.full(len(r), b) for r, b in zip(runs, beyond)])
     step = T[start] * (ps[miss] - ps[start])[:, None]
     guess = Z[start] + step
-    if method == "vhc":
-        again = find_gaits(
-            model, jnp.asarray(guess), _other_family(family), method, psi=jnp.asarray(ps[miss])
-        )
-        found = np.asarray(again.result._value) == RESULTS.successful._value
-        landed = np.asarray(jax.vmap(lambda g: _unknowns(g, method))(again))
-    else:  # shooting: the gait on the other root, where the sweep's search found it
-        found = np.asarray(gaits.result._value)[miss] == RESULTS.other_cycle._value
-        landed = Z[miss]
-    off = np.abs(landed - guess).max(-1)
+    # the gait on the other root, where the sweep's search found it
+    found = np.asarray(gaits.result._value)[miss] == RESULTS.other_cycle._value
+    off = np.abs(Z[miss] - guess).max(-1)
     passed = (
         found & (off <= 0.25 * np.abs(step).max(-1)) & (reach <= 2 * np.abs(ps[miss] - ps[start]))
     )

@@ -23,6 +23,7 @@ def damped_newton(
     tolerances=None,
     chord_below=None,
     residual_cap=jnp.inf,
+    chart=None,
 ):
     r"""Newton's method with a forward-mode Jacobian, globalised by Levenberg-Marquardt
     damping, optionally inexact (loose integrations while far from the solution) and
@@ -61,6 +62,15 @@ def damped_newton(
     `residual_cap`), when $\|r\|_\infty < \mathrm{atol}$, when no trial decreases
     the residual, or after `max_steps` accepted steps.
 
+    `chart = (to_y, from_y, use_y)`: other coordinates $y$ = `to_y(x)` of the
+    unknowns, and back, `from_y(y, x)` (the $x$ of $y$ reached by a step from $x$; NaN
+    where $y$ has no $x$); from a point where `use_y(y, r)` holds the steps (Newton and
+    damped) are computed and taken along straight lines in $y$, with the Jacobian
+    $J\,(\partial y/\partial x)^{-1}$.
+    Newton's iterates depend on the coordinates; far from a solution the ones in which
+    the residual is closer to linear there lead it in, near one those in which it is
+    better conditioned finish.
+
     **Returns:** `(x, r, aux, iterations, error)` at the last accepted point;
     `iterations` counts accepted steps, `error` is $\|J^{-1}r\|_\infty$ there (the
     Newton estimate of the error of $x$; `inf` where it is not finite, after chord
@@ -72,6 +82,14 @@ def damped_newton(
     def one(X, tol):  # the batch of one member that `damped_newton_batch` iterates
         return jax.tree_util.tree_map(lambda a: jnp.asarray(a)[None], call(X[0], tol[0]))
 
+    if chart is not None:
+        to_y, from_y, use_y = chart
+        chart = (
+            lambda X: to_y(X[0])[None],
+            lambda Y, X: from_y(Y[0], X[0])[None],
+            lambda Y, R: use_y(Y[0], R[0])[None],
+        )
+
     out = damped_newton_batch(
         one,
         x0[None],
@@ -82,6 +100,7 @@ def damped_newton(
         tolerances=tolerances,
         chord_below=chord_below,
         residual_cap=residual_cap,
+        chart=chart,
     )
     return jax.tree_util.tree_map(lambda a: a[0], out)
 
@@ -110,10 +129,12 @@ def damped_newton_batch(
     tolerances=None,
     chord_below=None,
     residual_cap=jnp.inf,
+    chart=None,
 ):
     r"""`damped_newton` on every member of a batch at once, written out along the leading
     axis (`X0`: `(B, n)`; `fn(X, tol) -> (R, aux)` with `tol`: `(B,)`, each row of `R`
-    depending on its own row of `X` only, every leaf of `aux` with the batch axis first).
+    depending on its own row of `X` only, every leaf of `aux` with the batch axis first;
+    `chart`'s functions map batches, row by row).
 
     The loop runs while any member is still iterating; members that have stopped keep
     their state. This is what `jax.vmap` makes of `damped_newton`, but the residual is
@@ -161,6 +182,9 @@ def damped_newton_batch(
     def solve(A, b):
         return jnp.linalg.solve(A, b[..., None])[..., 0]
 
+    def solve_matrix(A, B):
+        return jnp.linalg.solve(A, B)
+
     def iterating(carry):
         k, trials, done, chord = carry[4], carry[5], carry[6], carry[8]
         return (k < max_steps) & (trials < max_trials) & ~done & ~chord
@@ -168,25 +192,39 @@ def damped_newton_batch(
     def chord_iterating(carry):
         return (carry[4] < max_steps) & (carry[5] < max_trials) & ~carry[6]
 
-    def make_body(evaluate, active):
+    def make_body(evaluate, active, chart=None):
         def body(carry):
             X, R, J, aux, k, trials, done, lam, chord, tol_R = carry
             first = k < 0  # the first pass only evaluates R, J at the guesses
+            # The coordinates of the step: x, or y (`chart`) for members far from a root.
+            base, Js = X, J
+            if chart is not None:
+                to_y, from_y, use_y = chart
+                Y, dYdX, _ = batch_jacobian(lambda Z: (to_y(Z), None), X)
+                far = use_y(Y, R) & jnp.isfinite(dYdX).all((-2, -1))
+                Jy = jnp.swapaxes(
+                    solve_matrix(jnp.swapaxes(dYdX, -1, -2), jnp.swapaxes(J, -1, -2)), -1, -2
+                )
+                base, Js = where(far, Y, X), where(far, Jy, J)
             # Trial step from the accepted point (X, R, J): Newton, or damped after a failure.
-            Jt = jnp.swapaxes(J, -1, -2)
-            JtJ = Jt @ J
+            Jt = jnp.swapaxes(Js, -1, -2)
+            JtJ = Jt @ Js
             newton = trials == 0
-            dX = solve(
-                where(newton, J, JtJ + lam[:, None, None] * eye),
+            step = solve(
+                where(newton, Js, JtJ + lam[:, None, None] * eye),
                 where(newton, R, (Jt @ R[..., None])[..., 0]),
             )
-            dX = where(jnp.isfinite(dX).all(-1) & ~first, dX, jnp.zeros_like(dX))
+            step = where(jnp.isfinite(step).all(-1) & ~first, step, jnp.zeros_like(step))
+            X_t = base - step
+            if chart is not None:
+                X_t = where(far, from_y(X_t, X), X_t)
+            dX = X - X_t
             # A damped trial with no step ($J^Tr = 0$, or no finite solution, e.g. J = 0
             # where the residual is undefined): the member cannot move, so it stops as
             # after `max_trials` failures instead of re-evaluating the same point.
-            stuck = ~first & ~newton & ~(norm(dX) > 0)
+            stuck = ~first & ~newton & ~(norm(step) > 0)
             tol = trial_tolerance(R, first)
-            R_t, J_t, aux_t = evaluate(X - dX, tol, J)
+            R_t, J_t, aux_t = evaluate(X_t, tol, J)
             # A residual integrated more accurately than the accepted one may exceed it by
             # the accepted one's integration error: such a trial is accepted too (else a
             # member can stop at a loose residual that an exact one cannot beat).
@@ -199,8 +237,8 @@ def damped_newton_batch(
                     | (tightened & (norm(R_t) <= norm(R) + _ERROR_FACTOR * tol_R))
                 )
             )
-            X_new, R_new, J_new, aux_new = pick(improved, (X - dX, R_t, J_t, aux_t), (X, R, J, aux))
-            size = atol + rtol * norm(X - dX)
+            X_new, R_new, J_new, aux_new = pick(improved, (X_t, R_t, J_t, aux_t), (X, R, J, aux))
+            size = atol + rtol * norm(X_t)
             small = ~first & (norm(dX) < atol + rtol * norm(X))
             # The Newton step from the trial point estimates its error (to first order).
             close = (norm(solve(J_t, R_t)) < size) & (norm(R_t) < residual_cap)
@@ -259,7 +297,7 @@ def damped_newton_batch(
         tol0,
     )
     carry = jax.lax.while_loop(
-        lambda c: jnp.any(iterating(c)), make_body(evaluate, iterating), init
+        lambda c: jnp.any(iterating(c)), make_body(evaluate, iterating, chart), init
     )
     if chord_below is not None:  # the chord loop: the same steps, the residual alone
 
