@@ -2,6 +2,8 @@
 and the tangent of a gait along a parameter path (implicit differentiation of the
 residual)."""
 
+import math
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -74,7 +76,7 @@ def _continue(start, end, s_buf, n, z0, sign, method, s_prev=None, z_prev=None):
     s0 = s_buf[0]
     # every guess a prediction next to the last gait: Newton in (a, h) throughout (VHC)
     search, consts = jax.closure_convert(
-        lambda s, z: _search(path(s), z, sign, method, far=jnp.inf), s0, z0
+        lambda s, z: _search(path(s), z, sign, method, far=math.inf), s0, z0
     )
     shape = jax.eval_shape(search, s0, z0, *consts)
     buf = jax.tree_util.tree_map(lambda l: jnp.zeros((s_buf.shape[0],) + l.shape, l.dtype), shape)

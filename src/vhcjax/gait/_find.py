@@ -1,5 +1,6 @@
 """`find_gait` and `find_gaits`: the gait search as users call it, one gait or a batch."""
 
+import math
 import warnings
 
 import equinox as eqx
@@ -181,8 +182,8 @@ def find_gaits(
     - `mesh`: a `jax.sharding.Mesh` with a `"batch"` axis; default: all local devices.
     - `chord`: with `guesses`, finish Newton with chord steps (see `vhc_search`).
       `None` (default): where a device holds 64 or more members.
-    - `far`: VHC, with `guesses`: see `vhc_search` (`None`: its default; `inf` for
-      guesses predicted next to a gait, as `sweep` makes them).
+    - `far`: VHC, with `guesses`: see `vhc_search` (`None`: its default; `math.inf`
+      for guesses predicted next to a gait, as `sweep` makes them).
     - `vectorise`: ignored (every batch is one vectorised Newton loop); kept so that
       existing calls still run.
 
@@ -217,7 +218,9 @@ def find_gaits(
 
 
 def _find_gaits(model, guesses, family, method, solver, mesh, chord, far=None):
-    far = np.asarray(_FAR if far is None else far, float)  # an argument, not a constant
+    far = _FAR if far is None else far
+    if not (isinstance(far, float) and math.isinf(far)):  # `inf`: no chart (see vhc_search)
+        far = np.asarray(far, float)  # an argument, not a constant
     sizes = [
         jnp.shape(x)[0]
         for x in jax.tree_util.tree_leaves(model)

@@ -31,6 +31,7 @@ the post-impact section (`vhcjax.hybrid.fixed_point`).
 Both return the same `Gait` pytree and never raise under `jit`/`vmap`: inspect `result`.
 """
 
+import math
 from typing import NamedTuple
 
 import diffrax
@@ -484,8 +485,9 @@ def vhc_search(
     - `far`: `"newton"` only: from points with a residual (max-norm) above `far` and a
       relative discriminant of (5.13) above $10^{-3}$ the steps are taken in $(a, b)$,
       the unknowns of the thesis, in which a guess far from the gait, such as the thesis
-      seeds, is led in; elsewhere in $(a, h)$. `inf`: in $(a, h)$ throughout, for
-      guesses predicted next to a gait (continuation, sweeps). May be traced.
+      seeds, is led in; elsewhere in $(a, h)$. `math.inf` (a Python float): in $(a, h)$
+      throughout, for guesses predicted next to a gait (continuation, sweeps), with a
+      smaller program to compile. May be traced.
     - `axes`: searches a batch. `guess` is then `(B, 2)` and `axes` gives the batch axis
       of each of `model`'s leaves (`0` or `None`, as `jax.vmap`'s `in_axes`). With
       `"newton"` one loop iterates every member (`damped_newton_batch`).
@@ -576,7 +578,8 @@ def _vhc_newton(
         A, B, C = quadratic_coefficients(m, ab[0], ab[1])
         return (jnp.max(jnp.abs(r)) > far) & (B**2 - 4 * A * C > _FAR_DISCRIMINANT * B**2)
 
-    chart = (_from_search, _to_search_near, use_ab)
+    near_only = isinstance(far, float) and math.isinf(far)
+    chart = None if near_only else (_from_search, _to_search_near, use_ab)
     return _newton_search(
         _vhc_eval_h,
         config,
