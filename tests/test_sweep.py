@@ -164,12 +164,20 @@ def test_a_missed_slope_is_retried_from_its_neighbour():
     (end,) = hole.ends()
     assert end["isolated"] and end["result"] == "singular_phi_ode"
     assert "search failure" in end["reason"] and "phi''" not in end["reason"]
+    # neighbours by slope, whatever the order given: the miss first, or the last slope
+    perm = jnp.array([1, 0, 2])
+    shuffled = jax.tree_util.tree_map(lambda x: x[perm], hole)
+    assert [e["isolated"] for e in shuffled.ends()] == [True]
     code = jax.vmap(lambda p, r: vj.RESULTS.where(p, vj.RESULTS.singular_phi_ode, r))(
         jnp.arange(3) == 2, good.result
     )
     edge = _sweep.Sweep(jnp.asarray(psi), eqx.tree_at(lambda g: g.result, good, code))
     (end,) = edge.ends()
     assert not end["isolated"] and "phi''" in end["reason"]
+    perm = jnp.array([0, 2, 1])  # 3.1 degrees given between the others: still an end
+    assert [e["isolated"] for e in jax.tree_util.tree_map(lambda x: x[perm], edge).ends()] == [
+        False
+    ]
 
 
 def test_heavy_hip_sweep_finds_every_slope():
@@ -283,3 +291,9 @@ def test_a_guess_without_a_real_root_starts_at_the_vertex():
     near = vj.find_gaits(model, jnp.tile(jnp.array([0.2, -1.0]), (3, 1)), psi=three)
     assert vj.result_names(far.result) == ["successful"] * 3
     np.testing.assert_allclose(np.asarray(far.x_plus), np.asarray(near.x_plus), atol=1e-10)
+    # a guess walking uphill lands on the stable gait with its velocities reversed: the
+    # uphill (negative-time) solution, coded so although its d is the other root
+    up = vj.find_gaits(model, jnp.tile(jnp.array([0.145, 0.7]), (3, 1)), psi=three)
+    assert vj.result_names(up.result) == ["infeasible_uphill"] * 3
+    np.testing.assert_allclose(float(up.b[0]), -float(near.b[0]), rtol=1e-9)
+    np.testing.assert_allclose(float(up.T[0]), -float(near.T[0]), rtol=1e-9)

@@ -270,7 +270,7 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord, far=None):
 def _redo_without_chord(gaits, batched, shared, family, method, solver, mesh, far):
     """Members a chord finish left `not_converged` with a residual below 1e-8 are solved
     again, with Newton steps, from where they stopped: a residual that rounds above
-    `SUCCESS_TOL` (a heavy hip) needs Newton's error estimate to be accepted, and the
+    `SUCCESS_TOL` needs Newton's error estimate to be accepted, and the
     chord steps' Jacobian is too old to give one. (Host-side: not under `jit`.)"""
     code = np.asarray(gaits.result._value)
     redo = np.flatnonzero(

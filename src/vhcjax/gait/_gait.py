@@ -36,10 +36,8 @@ def accepted(residual, error):
     """Whether a search ends at a gait: its residual (max-norm) is below `SUCCESS_TOL`, or
     Newton's estimate of the error of its unknowns, $\\|J^{-1}r\\|_\\infty$, is below
     `ERROR_TOL` with a residual below 1e-8. The second admits problems whose residual
-    cannot be evaluated to `SUCCESS_TOL`: with a heavy hip (hip-to-leg mass ratio 1000)
-    the quadratic (5.13) nears a double root and $h = (b - P_{11} d)/P_{12}$ divides by
-    a small $P_{12}$, so the rounding of the residual is a few 1e-9 while $(a, b)$ is
-    known to 1e-12."""
+    cannot be evaluated to `SUCCESS_TOL` (in the unknowns $(a, b)$ a heavy hip's rounded
+    to a few 1e-9; none is known since the VHC search runs in $(a, h)$)."""
     return (residual < SUCCESS_TOL) | ((error < ERROR_TOL) & (residual < _NOISY_RESIDUAL))
 
 

@@ -381,7 +381,8 @@ def _vhc_eval_h(model, ah, family, config=VHC_CONFIG, tol=None):
     every model tried, against $10^{-8}$ in $(a, b)$ for a heavy hip), nothing divides
     by $P_{12}$, and a family passes through a double root of (5.13) in $(a, b)$ without
     a branch point. The gait's `family` (its root of (5.13) in $(a, b)$) is checked at
-    the end (`_finish_vhc`)."""
+    the end (`_unmirror`). That the gait's $d$ is the smaller root is measured, not
+    enforced: a gait with the larger one would not be found (none is known)."""
     del family  # the gait's d is the smaller root for both families
     a, h = ah[0], ah[1]
     data = _impact_data(model, a)
@@ -426,13 +427,9 @@ def _unmirror(model, gait, up, family):
     s = jnp.where(up, -1.0, 1.0)
     flip = jnp.concatenate([jnp.ones(n), jnp.full(n, s)])
     x_plus, x_minus = gait.x_plus * flip, gait.x_minus * flip
-    a, b, d = x_plus[0], x_plus[n], x_minus[n]
-    A, B, C = quadratic_coefficients(model, a, b)
-    other = (B**2 - 4 * A * C >= 0) & (family_sign(family) * (2 * A * d + B) < 0)
-    code = RESULTS.where(
-        (gait.result == RESULTS.successful) & other, RESULTS.other_cycle, gait.result
-    )
-    return _make_gait(
+    # the walking direction is judged here, on the gait turned back
+    code = RESULTS.where(gait.result == RESULTS.infeasible_uphill, RESULTS.successful, gait.result)
+    out = _make_gait(
         model,
         x_plus,
         x_minus,
@@ -444,6 +441,14 @@ def _unmirror(model, gait, up, family):
         _label(family),
         "vhc",
     )
+    # a gait (walking downhill, impact physical) whose d is the other root
+    a, b, d = x_plus[0], x_plus[n], x_minus[n]
+    A, B, C = quadratic_coefficients(model, a, b)
+    other = (B**2 - 4 * A * C >= 0) & (family_sign(family) * (2 * A * d + B) < 0)
+    code = RESULTS.where(
+        (out.result == RESULTS.successful) & other, RESULTS.other_cycle, out.result
+    )
+    return eqx.tree_at(lambda g: g.result, out, code)
 
 
 def vhc_search(
@@ -517,7 +522,7 @@ def vhc_search(
         x0 = _to_search(model, ab0, signs)
     else:
         x0 = eqx.filter_vmap(_to_search, in_axes=(axes, 0, 0))(model, ab0, signs)
-    # A guess that maps to no finite (a, h) (b = 0, or P12 = 0) is searched from (a, 0).
+    # A guess that maps to no finite (a, h) (A = 0 or P12 = 0) is searched from (a, 0).
     x0 = jnp.where(jnp.isfinite(x0), x0, jnp.zeros_like(x0))
     res_fn = lambda x: _vhc_eval_h(model, x, family, config)[0]  # noqa: E731
     if solver == "newton":

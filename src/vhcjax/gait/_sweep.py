@@ -51,7 +51,7 @@ class Sweep(eqx.Module):
         """Where the family stops existing or stops being found, as a list of dicts
         `{"slope_deg", "last_slope_deg", "result", "reason", "isolated"}` (host side),
         in the order of the slopes given. `isolated`: a missed slope between two found
-        ones, a search failure rather than an end (its `reason` says so)."""
+        ones (by slope), a search failure rather than an end (its `reason` says so)."""
         import numpy as np
 
         from .._results import result_names
@@ -66,6 +66,11 @@ class Sweep(eqx.Module):
             tan = np.abs(np.asarray(self.tangent)).max(axis=-1)
         else:  # built by hand without tangents: no fold is reported
             tan = np.zeros(len(ok))
+        # neighbours by slope (the slopes may come in any order)
+        by_slope = np.argsort(deg, kind="stable")
+        rank = np.empty_like(by_slope)
+        rank[by_slope] = np.arange(len(ok))
+        ok_by_slope = ok[by_slope]
         out = []
         for i in range(len(ok)):
             if ok[i]:
@@ -94,7 +99,8 @@ class Sweep(eqx.Module):
             }.get(names[i], names[i])
             if names[i] == "not_converged" and tan[prev] > _FOLD_TANGENT:
                 reason = f"fold: |dz*/dpsi| = {tan[prev]:.3g} at the last gait found"
-            isolated = 0 < i < len(ok) - 1 and bool(ok[i - 1] and ok[i + 1])
+            r = rank[i]
+            isolated = 0 < r < len(ok) - 1 and bool(ok_by_slope[r - 1] and ok_by_slope[r + 1])
             if isolated:  # whatever the code claims, the family goes on
                 reason = f"{names[i]}: a search failure; the family is found on both sides"
             out.append(
@@ -330,6 +336,17 @@ def _retry(model, ps, gaits, family, method, sign, reach, all_tangents=True):
             model, jnp.asarray(guess), family, method, psi=jnp.asarray(ps[miss]), far=math.inf
         )
         found = np.asarray(again.result._value) == RESULTS.successful._value
+        # a landing on the other root is kept too: `_other_root` reads passages from it
+        code = np.asarray(gaits.result._value)
+        other = (np.asarray(again.result._value) == RESULTS.other_cycle._value) & (
+            code[miss] != RESULTS.other_cycle._value
+        )
+        if other.any():
+            take, rows = miss[other], np.where(other)[0]
+            gaits = jax.tree_util.tree_map(
+                lambda a, b: _put(a, take, np.asarray(b)[rows]), gaits, again
+            )
+            Z[take] = np.asarray(unknowns(again))[rows]
         if not found.any():
             break
         take, rows = miss[found], np.where(found)[0]

@@ -37,9 +37,8 @@ def damped_newton(
     with $(J^TJ + \lambda I)\Delta x = J^Tr$ and growing $\lambda$ (no new Jacobian), up
     to `max_trials` times (at once, where the damped step is zero or not finite: then
     no step exists). Near a solution this is plain Newton (quadratic convergence);
-    far from it the damped steps turn toward steepest descent, which lets the VHC search
-    leave the edge of the region where (5.13) has real roots (plain Newton stalls there
-    from the thesis seed (7.2) for the unstable family).
+    far from it the damped steps turn toward steepest descent (plain Newton fails from the
+    thesis seed (7.2) for the unstable family).
 
     `tolerances = (loose, final)`: the integration tolerance `tol` handed to `fn` for a
     trial from a point with residual $r$ is $10^{-4}\|r\|_\infty^2$ clipped to
