@@ -125,11 +125,16 @@ def _energy_gap(model, data, b, d):
     return model.energy(x_minus) - model.energy(x_plus)
 
 
-def _quadratic(model, data, b):
-    ds = jnp.array([-1.0, 0.0, 1.0]) * jnp.ones_like(jnp.asarray(b, dtype=float))
-    # One trace of the energies, batched over the three values of d.
-    fm, f0, fp = jax.vmap(lambda d: _energy_gap(model, data, b, d))(ds)
+def _fit_quadratic(gap, like):
+    """$(A, B, C)$ of a quadratic `gap(d)` from its values at $d = -1, 0, 1$ (exact); one
+    trace of the energies, batched over the three values (`like`: their dtype)."""
+    ds = jnp.array([-1.0, 0.0, 1.0]) * jnp.ones_like(jnp.asarray(like, dtype=float))
+    fm, f0, fp = jax.vmap(gap)(ds)
     return 0.5 * (fp + fm) - f0, 0.5 * (fp - fm), f0
+
+
+def _quadratic(model, data, b):
+    return _fit_quadratic(lambda d: _energy_gap(model, data, b, d), b)
 
 
 def quadratic_coefficients(model, a, b):
@@ -312,14 +317,12 @@ def vhc_residual(model, ab, family, config=VHC_CONFIG):
 def _quadratic_h(model, data, h):
     """$(A', B', C')$ of the energy gap as a quadratic in $d$ with $a$ and the pre-impact
     $h = \\dot q_2^-$ fixed: $b = P_{11} d + P_{12} h$, $f = P_{21} d + P_{22} h$ (5.7)."""
-    ds = jnp.array([-1.0, 0.0, 1.0]) * jnp.ones_like(jnp.asarray(h, dtype=float))
 
     def gap(d):
         x_plus, x_minus = _states_from(data, data.P[0, 0] * d + data.P[0, 1] * h, d, h)
         return model.energy(x_minus) - model.energy(x_plus)
 
-    fm, f0, fp = jax.vmap(gap)(ds)
-    return 0.5 * (fp + fm) - f0, 0.5 * (fp - fm), f0
+    return _fit_quadratic(gap, h)
 
 
 def _to_search(model, ab, family):
@@ -332,8 +335,7 @@ def _to_search(model, ab, family):
     disc = B**2 - 4 * A * C
     root = jnp.sqrt(jnp.where(disc > 0, disc, 0.0))
     d = (-B + family_sign(family) * root) / (2 * A)
-    P = data.P
-    return jnp.stack([a, (b - P[0, 0] * d) / P[0, 1]])
+    return jnp.stack([a, _relations(data, b, d)[1]])
 
 
 def _to_search_near(model, ab, ah):
@@ -347,8 +349,7 @@ def _to_search_near(model, ab, ah):
     d_now, _ = _smaller_root(_quadratic_h(model, _impact_data(model, ah[0]), ah[1]))
     lo, hi = (-B - root) / (2 * A), (-B + root) / (2 * A)
     d = jnp.where(jnp.abs(hi - d_now) < jnp.abs(lo - d_now), hi, lo)
-    P = data.P
-    return jnp.where(disc < 0, jnp.nan, jnp.stack([a, (b - P[0, 0] * d) / P[0, 1]]))
+    return jnp.where(disc < 0, jnp.nan, jnp.stack([a, _relations(data, b, d)[1]]))
 
 
 def _from_search(model, ah):
