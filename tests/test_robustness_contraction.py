@@ -54,4 +54,10 @@ def test_walkers_that_fall_have_no_measured_rate():
     zu = np.asarray(vj.find_gait(model, "unstable").z)
     c = vj.contraction(model, zu, num_perturbations=4, scale=1e-3, num_steps=30)
     assert float(c.spectral_radius) > 1.0
+    # Its multipliers are all real, and still complex numbers (as JSON: [re, im] pairs),
+    # equal to those of `gait_multipliers` (eigenvalues by JAX, not numpy).
+    assert np.iscomplexobj(np.asarray(c.multipliers))
+    assert not np.asarray(c.multipliers).imag.any()
+    pm = np.asarray(vj.gait_multipliers(model, zu, transverse=False).poincare)
+    np.testing.assert_allclose(np.asarray(c.multipliers), pm, atol=1e-9)
     assert np.isnan(np.asarray(c.measured_rates)).all() and np.isnan(float(c.measured_rate))

@@ -54,6 +54,22 @@ def test_slope_derivatives_vs_finite_differences():
     np.testing.assert_allclose(np.sort(s.dmodulus), np.sort(fd_mod), rtol=1e-4)
 
 
+def test_eigenvalue_derivatives_of_a_real_spectrum():
+    """The multipliers and their derivatives are complex even when every eigenvalue is
+    real (numpy returns a real array then, which JSON would print as a flat list), and
+    they equal central differences of the eigenvalues along `dJ`."""
+    from vhcjax.robustness._slope_sensitivity import eigenvalue_derivatives
+
+    J = np.array([[4.0, 1.0, 0.0], [0.5, 0.4, 0.2], [0.0, 0.1, 0.07]])
+    dJ = np.array([[1.0, -2.0, 0.5], [0.3, 0.2, 0.0], [1.0, 0.0, -0.4]])
+    lam, dlam, dmod = eigenvalue_derivatives(J, dJ)
+    assert np.iscomplexobj(lam) and np.iscomplexobj(dlam) and not lam.imag.any()
+    h = 1e-6
+    ev = [np.sort(np.linalg.eigvals(J + s * h * dJ).real)[::-1] for s in (1, -1)]
+    np.testing.assert_allclose(dlam.real, (ev[0] - ev[1]) / (2 * h), rtol=1e-7)
+    np.testing.assert_allclose(dmod, dlam.real * np.sign(lam.real), rtol=1e-12)
+
+
 def test_gait_sensitivity_norm_vs_simulation():
     model, _, x_star, _ = stable_gait()
     g = vj.gait_sensitivity_norm(model, x_star, 40)

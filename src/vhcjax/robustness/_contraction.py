@@ -24,7 +24,7 @@ from ._recovery import FELL, recover
 class Contraction(eqx.Module):
     """Contraction to a gait.
 
-    - `multipliers`: eigenvalues of the step-map Jacobian, by modulus, descending.
+    - `multipliers`: eigenvalues of the step-map Jacobian (complex), by modulus, descending.
     - `spectral_radius`: $\\rho = \\max |\\lambda|$.
     - `steps_10x`, `steps_100x`: $\\log 0.1/\\log\\rho$ and $\\log 0.01/\\log\\rho$ (predicted).
     - `measured_rate`: median over the recoveries of the fitted per-step decay factor.
@@ -115,7 +115,7 @@ def contraction(
     key = jax.random.PRNGKey(0) if key is None else key
     J, mr = _jacobian_jit(model, z_star, config)
     check_returns(z_star, mr.z_next, "contraction", str(result_names(mr.result)))
-    ev = np.linalg.eigvals(np.asarray(J))
+    ev = np.linalg.eigvals(np.asarray(J)).astype(complex)  # complex even when all are real
     ev = ev[np.argsort(-np.abs(ev))]
     rho = float(np.abs(ev[0]))
     dz = jax.random.uniform(key, (num_perturbations, z_star.shape[0]), minval=-1.0, maxval=1.0)

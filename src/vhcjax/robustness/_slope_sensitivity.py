@@ -104,11 +104,18 @@ def slope_sensitivity(model, z_star, *, config=DEFAULT_CONFIG):
     require_gait(model, z_star, "slope_sensitivity")
     z = jnp.asarray(z_star, dtype=float)
     (zn, T, L, v), dz, (dT, dL, dv), J, dJ = _implicit(model, z, config)
-    Jn, dJn = np.asarray(J), np.asarray(dJ)
-    lam, V = np.linalg.eig(Jn)
+    lam, dlam, dmod = eigenvalue_derivatives(np.asarray(J), np.asarray(dJ))
+    return SlopeSensitivity(z, dz, T, dT, L, dL, v, dv, lam, dlam, dmod, J, dJ)
+
+
+def eigenvalue_derivatives(J, dJ):
+    """Eigenvalues of `J` by modulus (descending, complex even when all are real), their
+    derivatives along `dJ` ($\\dot\\lambda_i = w_i \\dot J v_i$ with left eigenvectors
+    $W = V^{-1}$) and the derivatives of their moduli. Host-side (numpy)."""
+    lam, V = (x.astype(complex) for x in np.linalg.eig(J))
     order = np.argsort(-np.abs(lam))
     lam, V = lam[order], V[:, order]
     W = np.linalg.inv(V)  # rows: left eigenvectors with W V = I
-    dlam = np.einsum("ij,jk,ki->i", W, dJn, V)
+    dlam = np.einsum("ij,jk,ki->i", W, dJ, V)
     dmod = np.real(np.conj(lam) * dlam) / np.abs(lam)
-    return SlopeSensitivity(z, dz, T, dT, L, dL, v, dv, lam, dlam, dmod, J, dJ)
+    return lam, dlam, dmod
