@@ -305,3 +305,42 @@ def test_cli_basin(capsys, kw, gait):
         assert sim.result == RESULTS.successful
         z_end = kw.state_to_section(sim.steps.x_plus[-1])
         assert np.max(np.abs(z_end - gait.z)) < 1e-4
+
+
+# ---- other parameters: the gait continued from the default walker --------------------
+
+
+def test_continued_gait_at_a_heavy_hip_and_where_a_continuation_stops(kw, gait):
+    """`continue_fixed_point` follows the gait family from the default walker to a hip 100
+    times heavier: its fixed point returns after 100 simulated steps, and a plain
+    continuation in 12.5 % steps of the hip mass (secant predictor) lands on it too. Newton
+    straight from the default gait lands elsewhere, on another (unstable) gait. Where the
+    family is lost (shank mass 5 kg) the continuation stops with the failing step's code,
+    `fell`, at a model it did solve, never with the code of a non-finite Newton iterate."""
+    heavy = KneedWalker(mh=50.0)
+    fp, reached = P.continue_fixed_point(kw, gait.z, heavy)
+    assert vhcjax.result_names(fp.result) == "successful" and reached is heavy
+    sim = simulate_jit(heavy, fp.x0, 100)
+    assert int(sim.num_successful) == 100
+    zs = np.asarray(jax.vmap(heavy.state_to_section)(sim.steps.x_plus))
+    assert np.abs(zs - np.asarray(fp.z)).max() < 1e-8
+    z_prev = z = gait.z
+    for k, mh in enumerate(np.geomspace(0.5, 50.0, 40)[1:]):
+        sol = fixed_point_jit(KneedWalker(mh=jnp.asarray(mh)), z if k == 0 else 2 * z - z_prev)
+        assert sol.result == RESULTS.successful, mh
+        z_prev, z = z, sol.z
+    np.testing.assert_allclose(np.asarray(fp.z), np.asarray(z), atol=1e-10)
+    direct = fixed_point_jit(heavy, gait.z)
+    assert direct.result == RESULTS.successful
+    assert np.abs(np.asarray(direct.z) - np.asarray(fp.z)).max() > 0.05
+    assert np.abs(np.linalg.eigvals(np.asarray(jacobian_jit(heavy, direct.z)))).max() > 1.0
+
+    fp, reached = P.continue_fixed_point(kw, gait.z, KneedWalker(ms=5.0))
+    assert vhcjax.result_names(fp.result) == "fell"
+    assert 0.05 < float(reached.ms) < 5.0 and np.isfinite(np.asarray(fp.z)).all()
+    back, _ = P.continue_fixed_point(kw, gait.z, reached)  # the part of the path it solved
+    assert back.result == RESULTS.successful
+    # Newton from the default gait on the far model diverges: coded by its start's step
+    far = fixed_point_jit(KneedWalker(psi=jnp.asarray(0.0087)), gait.z)
+    assert vhcjax.result_names(far.result) == "not_converged"
+    assert np.isfinite(np.asarray(far.z)).all() and np.isfinite(float(far.residual))

@@ -26,6 +26,7 @@ from .hybrid import (
     Simulation as Simulation,
     SolverConfig as SolverConfig,
     StepResult as StepResult,
+    continue_fixed_point as continue_fixed_point,
     fixed_point as fixed_point,
     jacobian as poincare_jacobian,  # noqa: F401 (re-export)
     multipliers as poincare_multipliers,  # noqa: F401 (re-export)

@@ -4,7 +4,6 @@ multipliers in the complex plane."""
 import math
 
 from ._common import (
-    KNEED_SEED,
     CLIError,
     ComputationFailed,
     add_model_choice,
@@ -14,6 +13,7 @@ from ._common import (
     check_slope_deg,
     count,
     describe,
+    kneed_gait,
     model_from_args,
     parse_range,
     print_json,
@@ -85,7 +85,8 @@ def register(subparsers):
         default=None,
         help="gait search: vhc = thesis Problem 1, shooting = Problem 2 (default vhc; "
         "the VHC search needs q1 monotone along the step; the kneed walker: shooting, "
-        "the default there, from its gait at 0.0504 rad, Poincare multipliers only)",
+        "the default there, continued from its gait at the default parameters, Poincare "
+        "multipliers only)",
     )
     q.add_argument("--png", metavar="FILE", help="save the complex-plane plot")
     q.add_argument("--json", action="store_true", help="print a JSON object")
@@ -111,12 +112,9 @@ def run_multipliers(args):
         )
     model = walker_from_args(args)
     check_figure_file(args.png, "--png")
-    if kneed:  # its one gait family, from the gait at its default slope
-        import jax.numpy as jnp
-
-        from ..hybrid import fixed_point_jit
-
-        fp = fixed_point_jit(model, jnp.asarray(KNEED_SEED))
+    why = None
+    if kneed:  # its one gait family, continued from its gait at the default parameters
+        fp, why = kneed_gait(model)
         found, z = result_names(fp.result), fp.z
         gm = S.gait_multipliers_jit(model, z, transverse=False)
     else:
@@ -128,11 +126,7 @@ def run_multipliers(args):
         z = model.state_to_section(gait.x_plus)
         gm = None if found != "successful" else S.gait_multipliers_jit(model, z)
     if gm is None or found != "successful":
-        hint = (
-            "the seed is the gait at 0.0504 rad: try a slope nearer to 2.89 deg"
-            if kneed
-            else f"try --method {'shooting' if args.method == 'vhc' else 'vhc'}"
-        )
+        hint = why if kneed else f"try --method {'shooting' if args.method == 'vhc' else 'vhc'}"
         raise ComputationFailed(
             f"no {'kneed-walker' if kneed else args.family} gait found at "
             f"{args.slope_deg} deg by {args.method} ({found}); {hint}"

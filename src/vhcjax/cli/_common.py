@@ -171,6 +171,38 @@ def add_model_flags(parser, *, slope=True, slope_default=3.0):
 KNEED_SEED = (0.18818546, -1.10958733, -0.05714811)
 KNEED_SLOPE_DEG = math.degrees(0.0504)
 
+
+def kneed_gait(model, guess=None):
+    """The kneed walker's gait on `model`: Newton shooting from `guess` when given, else
+    its gait at the default parameters (`KNEED_SEED`) continued to `model`
+    (`vhcjax.continue_fixed_point`). **Returns:** `(fixed_point, why)`: `why` is `None`
+    on success, else one line saying where and how the search stopped."""
+    import jax.numpy as jnp
+
+    from .. import KneedWalker
+    from .._results import result_names
+    from ..hybrid import continue_fixed_point, fixed_point_jit
+
+    if guess is not None:
+        fp = fixed_point_jit(model, jnp.asarray(guess, float))
+        code = result_names(fp.result)
+        return fp, None if code == "successful" else f"Newton from --guess ended {code}"
+    fp, reached = continue_fixed_point(KneedWalker(), KNEED_SEED, model)
+    code = result_names(fp.result)
+    if code == "successful":
+        return fp, None
+    changed = [
+        f"{name} {float(getattr(reached, name)):.4g}"
+        for name in ("psi", "ms", "mt", "mh", "a1", "b1", "a2", "b2", "g")
+        if float(getattr(model, name)) != float(getattr(KneedWalker(), name))
+    ]
+    where = ", ".join(changed).replace("psi ", "slope (rad) ") or "the default parameters"
+    return fp, (
+        f"its gait, continued from the default walker (slope 0.0504 rad), is last found at "
+        f"{where}; the next step ends {code}. Give --guess to search from another point"
+    )
+
+
 #: Kneed-walker flags: (dest, flag, KneedWalker field, help).
 KNEED_FLAGS = (
     ("mass_shank", "--mass-shank", "ms", "shank mass in kg (default 0.05)"),

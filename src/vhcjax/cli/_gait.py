@@ -6,7 +6,6 @@ import math
 from typing import Any
 
 from ._common import (
-    KNEED_SEED,
     STATE,
     CLIError,
     add_model_choice,
@@ -15,6 +14,7 @@ from ._common import (
     check_output_file,
     check_slope_deg,
     describe,
+    kneed_gait,
     model_from_args,
     parse_range,
     print_json,
@@ -227,11 +227,9 @@ def run_gait(args):
 
 def _run_kneed_gait(args):
     """The kneed walker: shooting (Newton on its step map) and Poincare multipliers."""
-    import jax.numpy as jnp
     import numpy as np
 
     from .._results import result_names
-    from ..hybrid import fixed_point_jit as fixed_point
     from ..stability import gait_multipliers
 
     if args.method != "shooting":
@@ -239,8 +237,7 @@ def _run_kneed_gait(args):
             "the kneed walker's gaits are found by shooting (its default): drop --method vhc"
         )
     model = walker_from_args(args)
-    guess = jnp.asarray(args.guess if args.guess is not None else KNEED_SEED)
-    fp = fixed_point(model, guess)
+    fp, why = kneed_gait(model, args.guess)
     result = result_names(fp.result)
     rec = {
         "result": result,
@@ -254,6 +251,8 @@ def _run_kneed_gait(args):
     }
     if result == "successful":
         rec["period"] = float(fp.periods[0])
+    else:
+        rec["reason"] = why
     if result == "successful" and not args.no_stability:
         # the program of `vhcjax multipliers --model kneed`: sorted by modulus
         ev = np.asarray(gait_multipliers(model, fp.z, transverse=False).poincare)
@@ -263,6 +262,8 @@ def _run_kneed_gait(args):
         print_json(rec)
     else:
         print(f"kneed walker gait at {args.slope_deg} deg (shooting): {result}")
+        if why:
+            print(f"  {why}")
         if result == "successful":
             print("  z = (q1, dq1, dq2) = " + ", ".join(f"{v:.8f}" for v in rec["z"]))
             line = f"  period {rec['period']:.8f} s"

@@ -4,8 +4,6 @@ import math
 import sys
 
 from ._common import (
-    KNEED_SEED,
-    KNEED_SLOPE_DEG,
     POSITIVE,
     CLIError,
     ComputationFailed,
@@ -14,6 +12,7 @@ from ._common import (
     check_figure_file,
     check_finite,
     count,
+    kneed_gait,
     number,
     print_json,
     walker_from_args,
@@ -174,29 +173,6 @@ def _finite_or_none(obj):
     return obj
 
 
-def _kneed_gait(model):
-    """The kneed walker's gait at the model's slope, continued in the slope (steps of at
-    most 0.005 rad, secant predictor) from its gait at the reference slope."""
-    import equinox as eqx
-    import jax.numpy as jnp
-    import numpy as np
-
-    from .._results import RESULTS
-    from ..hybrid import fixed_point_jit
-
-    target = float(model.psi)
-    start = math.radians(KNEED_SLOPE_DEG)
-    n = max(1, math.ceil(abs(target - start) / 0.005))
-    z_prev = z = jnp.asarray(KNEED_SEED)
-    for k, psi in enumerate(np.linspace(start, target, n + 1)):
-        guess = z if k < 2 else 2 * z - z_prev
-        fp = fixed_point_jit(eqx.tree_at(lambda m: m.psi, model, jnp.asarray(psi)), guess)
-        if fp.result != RESULTS.successful:
-            return None, math.degrees(psi)
-        z_prev, z = z, fp.z
-    return z, None
-
-
 def run_stabilize(args):
     q, r = _check(args)
     check_figure_file(args.png, "--png")
@@ -214,12 +190,10 @@ def run_stabilize(args):
     kneed = args.model == "kneed"
     model = walker_from_args(args)
     if kneed:
-        z, lost = _kneed_gait(model)
-        if z is None:
-            raise ComputationFailed(
-                f"no kneed-walker gait found at {args.slope_deg} deg: its continuation "
-                f"from {KNEED_SLOPE_DEG:.4f} deg stops at {lost:.4f} deg"
-            )
+        fp, why = kneed_gait(model)
+        if why is not None:
+            raise ComputationFailed(f"no kneed-walker gait found at {args.slope_deg} deg: {why}")
+        z = fp.z
     else:
         psi = math.radians(args.slope_deg)
         fam = period1_family([psi], args.family, model=model)

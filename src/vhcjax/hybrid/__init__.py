@@ -21,6 +21,7 @@ from ._multidomain import (
 from ._poincare import (
     FixedPoint as FixedPoint,
     MapResult as MapResult,
+    continue_fixed_point as continue_fixed_point,
     fixed_point as fixed_point,
     fixed_point_jit as fixed_point_jit,
     jacobian as jacobian,

@@ -105,17 +105,20 @@ def _search(model, z0, k, rtol, atol, max_steps, config):
         max_steps=max_steps,
         throw=False,
     )
-    z = sol.value
+    finite = jnp.all(jnp.isfinite(sol.value))
+    # Newton diverged (a failed map has no slope, and its step is not finite): the
+    # search ends at its start, coded `not_converged`, or with the code of the start's
+    # own map where that fails (a seed that falls is coded `fell`, as a simulation
+    # from it says), never with the code of a non-finite iterate.
+    z = jnp.where(finite, sol.value, z0)
     final = step_map(model, z, k, config)
     res = jnp.max(jnp.abs(final.z_next - z))
-    ok_newton = sol.result == optx.RESULTS.successful
-    finite = jnp.all(jnp.isfinite(z)) & jnp.isfinite(res)
+    ok_newton = (sol.result == optx.RESULTS.successful) & finite & jnp.isfinite(res)
     code = RESULTS.where(
         final.result != RESULTS.successful,
         final.result,
-        RESULTS.where(ok_newton & finite & (res < 1e-8), RESULTS.successful, RESULTS.not_converged),
+        RESULTS.where(ok_newton & (res < 1e-8), RESULTS.successful, RESULTS.not_converged),
     )
-    z = jnp.where(finite, z, z0)
     return FixedPoint(
         z, model.section_to_state(z), final.periods, sol.stats["num_steps"], res, code
     )
@@ -167,3 +170,85 @@ def fixed_point_jit(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, con
 step_map_jit = stored_jit(step_map)
 jacobian_jit = stored_jit(jacobian)
 multipliers_jit = stored_jit(multipliers)
+
+
+#: Largest relative change of a parameter in one step of `continue_fixed_point` at
+#: first (later steps grow to 4x that while they succeed); `_MAX_HALVINGS` halvings of
+#: a failing step before it gives up.
+_CONTINUATION_RATIO = 0.015
+_MAX_HALVINGS = 6
+
+
+def _homotopy_model(start, model, s):
+    """The model a fraction `s` of the way from `start` to `model`: every float parameter
+    interpolated geometrically where both ends are positive, else linearly."""
+    import numpy as np
+
+    def mix(a, b):
+        if not eqx.is_inexact_array(a):
+            return a
+        a, b = np.asarray(a, float), np.asarray(b, float)
+        if np.all(a > 0) and np.all(b > 0):
+            return jnp.asarray(a ** (1 - s) * b**s)
+        return jnp.asarray((1 - s) * a + s * b)
+
+    return jax.tree_util.tree_map(mix, start, model)
+
+
+def continue_fixed_point(start, z_start, model, k=1, *, config=DEFAULT_CONFIG):
+    """The fixed point of $P^k$ on `model` that continues the one of `start` near
+    `z_start`: a homotopy in the parameters (every float parameter at once, geometrically
+    where both ends are positive), each step solved by `fixed_point_jit` from a secant
+    prediction. A step moves no parameter by more than 1.5 % at first, up to 6 % while
+    steps succeed, and is halved (up to 6 times) where one fails. So a gait family is
+    followed to other parameters rather than Newton from a distant seed landing on
+    whichever fixed point is nearest, or on none.
+
+    Host-side (concrete inputs; a Python loop of compiled searches).
+
+    **Returns:** `(fixed_point, reached)`: the `FixedPoint` at `model` (`successful`), or
+    the failed search of the step where the continuation stopped (its code says why:
+    `fell`, `not_converged`, ...); `reached` is the last model solved (`model` itself
+    on success, `start` if even `z_start` does not converge there).
+    """
+    import math
+
+    import numpy as np
+
+    leaves = jax.tree_util.tree_leaves((start, model, z_start))
+    if any(isinstance(x, jax.core.Tracer) for x in leaves):
+        raise TypeError("continue_fixed_point runs on the host: concrete inputs only")
+    a, b = jax.tree_util.tree_leaves(start), jax.tree_util.tree_leaves(model)
+    if jax.tree_util.tree_structure(start) != jax.tree_util.tree_structure(model) or any(
+        not eqx.is_inexact_array(x) and not np.array_equal(x, y) for x, y in zip(a, b)
+    ):
+        raise ValueError("continue_fixed_point: start and model must be the same kind of model")
+    spread = 0.0
+    for x, y in zip(a, b):
+        if eqx.is_inexact_array(x):
+            x, y = np.asarray(x, float), np.asarray(y, float)
+            positive = np.all(x > 0) and np.all(y > 0)
+            change = (
+                np.abs(np.log(y / x)) if positive else np.abs(y - x) / np.maximum(1.0, np.abs(x))
+            )
+            spread = max(spread, float(np.max(change)))
+    if not math.isfinite(spread):
+        raise ValueError("continue_fixed_point: every parameter must be finite")
+    first = 1.0 / max(1, math.ceil(spread / _CONTINUATION_RATIO))
+    fp = fixed_point_jit(start, jnp.asarray(z_start, float), k, config=config)
+    if fp.result != RESULTS.successful:
+        return fp, start
+    s, ds, z, previous, reached = 0.0, first, fp.z, None, start
+    while s < 1.0:
+        t = min(1.0, s + ds)
+        guess = z if previous is None else z + (z - previous[1]) * ((t - s) / (s - previous[0]))
+        m = model if t == 1.0 else _homotopy_model(start, model, t)
+        trial = fixed_point_jit(m, guess, k, config=config)
+        if trial.result == RESULTS.successful:
+            previous, s, z, fp, reached = (s, z), t, trial.z, trial, m
+            ds = min(1.5 * ds, 16 * first)
+        else:
+            ds /= 2
+            if ds < first / 2**_MAX_HALVINGS:
+                return trial, reached
+    return fp, reached
