@@ -295,10 +295,26 @@ def test_a_model_flag_given_at_another_models_default_is_not_ignored():
 
 
 def test_no_gait_is_a_failed_computation_not_bad_input(capsys):
-    # valid flags, but no gait from the default seed at 29 degrees: exit 1, one line
+    # valid flags, but no stable gait at 29 degrees: exit 1, one line
     assert main(["contraction", "--slope-deg", "29", "--quiet"]) == 1
     err = capsys.readouterr().err.strip()
-    assert "no gait found" in err and "\n" not in err and "error" not in err
+    assert "no stable gait found" in err and "\n" not in err and "error" not in err
+
+
+def test_robustness_commands_analyse_the_gait_that_gait_finds(capsys):
+    """Without `--gait` the robustness commands analyse the stable gait as `vhcjax gait`
+    finds it (VHC continuation), made a fixed point of the step map by shooting: at 0.5
+    degrees Newton from the 3-degree gait would land on an unstable gait (spectral
+    radius 1.97). The two agree to 1e-9, and the gait is stable (0.539)."""
+    assert main(["gait", "--slope-deg", "0.5", "--json", "--quiet"]) == 0
+    g = json.loads(capsys.readouterr().out)
+    argv = ["contraction", "--slope-deg", "0.5", "--perturbations", "4", "--steps", "8"]
+    assert main(argv + ["--json", "--quiet"]) == 0
+    c = json.loads(capsys.readouterr().out)
+    x0 = g["x0"]
+    np.testing.assert_allclose(c["gait"], [x0[0], x0[2], x0[3]], atol=1e-9)
+    assert c["gait_stable"] is True
+    np.testing.assert_allclose(c["spectral_radius"], g["max_abs_multiplier"], atol=1e-8)
 
 
 _M = vj.CompassGait()

@@ -5,7 +5,6 @@ import math
 from ._common import (
     FINITE,
     HALF_WIDTH,
-    KNEED_SEED,
     STATE,
     CLIError,
     ComputationFailed,
@@ -14,6 +13,7 @@ from ._common import (
     check_figure_file,
     count,
     describe,
+    kneed_gait,
     number,
     print_json,
     progress,
@@ -21,7 +21,6 @@ from ._common import (
     warn,
 )
 
-STABLE_SEED = (0.2186688, -1.09238359, -0.37737395)  # stable 3-degree gait (Newton seed)
 #: Largest basin grid (points): each point is a simulation and some 100 bytes of results
 #: in memory, more in JSON; beyond this, refuse up front rather than run out of memory.
 MAX_GRID_POINTS = 4_000_000
@@ -39,7 +38,8 @@ def _common(p, png_help):
         metavar=("Q1", "DQ1", "DQ2"),
         default=None,
         help="Newton seed for the gait: post-impact q1 (rad), dq1, dq2 (rad/s); "
-        "default: the stable 3-degree gait (the kneed walker: its gait at 0.0504 rad)",
+        "default: the stable gait, as `vhcjax gait` finds it (the kneed walker: its gait "
+        "continued from the default parameters)",
     )
     p.add_argument("--json", action="store_true", help="print the results as one JSON object")
     p.add_argument("--png", metavar="FILE", help=png_help)
@@ -47,7 +47,12 @@ def _common(p, png_help):
 
 
 def _gait(args):
-    """The gait (fixed point of the step map) from the seed, or a one-line error."""
+    """The gait the command analyses, or a one-line error: Newton shooting from `--gait`
+    when given; else the stable gait, found as `vhcjax gait` finds it (continued from
+    the default model's gait to this model and slope; the kneed walker: from its gait
+    at the default parameters), then made a fixed point of the step map by Newton
+    shooting from there. Newton from one fixed seed would land on whichever gait is
+    nearest: at 0.5 degrees an unstable one, with a heavy hip none."""
     import jax.numpy as jnp
     import numpy as np
 
@@ -55,14 +60,30 @@ def _gait(args):
     from ..hybrid import fixed_point_jit
 
     model = walker_from_args(args)
-    if args.gait is None:
-        args.gait = list(KNEED_SEED if getattr(args, "model", "") == "kneed" else STABLE_SEED)
-    fp = fixed_point_jit(model, jnp.asarray(args.gait, float))
-    if result_names(fp.result) != "successful":
-        raise ComputationFailed(
-            f"no gait found from --gait {args.gait} at slope {args.slope_deg} deg "
-            f"({result_names(fp.result)}); give a better seed"
-        )
+    if args.gait is not None:
+        fp = fixed_point_jit(model, jnp.asarray(args.gait, float))
+        if result_names(fp.result) != "successful":
+            raise ComputationFailed(
+                f"no gait found from --gait {args.gait} at slope {args.slope_deg} deg "
+                f"({result_names(fp.result)}); give a better seed"
+            )
+    elif getattr(args, "model", "") == "kneed":
+        fp, why = kneed_gait(model)
+        if why is not None:
+            raise ComputationFailed(f"no kneed-walker gait found at {args.slope_deg} deg: {why}")
+    else:
+        from ..gait import find_gait
+
+        gait = find_gait(model, "stable", throw=False)
+        code = result_names(gait.result)
+        fp = fixed_point_jit(model, model.state_to_section(gait.x_plus))
+        if code == "successful":
+            code = result_names(fp.result)
+        if code != "successful":
+            raise ComputationFailed(
+                f"no stable gait found at slope {args.slope_deg} deg ({code}); give --gait "
+                "to analyse another one"
+            )
     return model, fp.z, fp.x0, float(fp.periods[0]), np.asarray(fp.z)
 
 
