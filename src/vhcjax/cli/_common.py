@@ -191,15 +191,19 @@ def kneed_gait(model, guess=None):
     code = result_names(fp.result)
     if code == "successful":
         return fp, None
+    default = KneedWalker()
     changed = [
-        f"{name} {float(getattr(reached, name)):.4g}"
+        f"slope {math.degrees(float(reached.psi)):.4g} deg"
+        if name == "psi"
+        else f"{name} {float(getattr(reached, name)):.4g}"
         for name in ("psi", "ms", "mt", "mh", "a1", "b1", "a2", "b2", "g")
-        if float(getattr(model, name)) != float(getattr(KneedWalker(), name))
+        if float(getattr(model, name)) != float(getattr(default, name))
     ]
-    where = ", ".join(changed).replace("psi ", "slope (rad) ") or "the default parameters"
+    where = ", ".join(changed) or "the default parameters"
     return fp, (
-        f"its gait, continued from the default walker (slope 0.0504 rad), is last found at "
-        f"{where}; the next step ends {code}. Give --guess to search from another point"
+        f"its gait, continued from the default walker (slope {KNEED_SLOPE_DEG:.4g} deg), is "
+        f"last found at {where}; the next step ends {code}. Give --guess to search from "
+        "another point"
     )
 
 
