@@ -155,6 +155,7 @@ def test_range_never_passes_stop():
     assert parse_range("1:2:0.4") == pytest.approx([1.0, 1.4, 1.8])
     assert parse_range("1:2:0.5") == pytest.approx([1.0, 1.5, 2.0])
     assert parse_range("0.1:0.3:0.1")[-1] == 0.3  # not 0.30000000000000004
+    assert parse_range("0.3:1.5:0.3")[2] == 0.9  # not 0.8999999999999999
     assert len(parse_range("0.5:6:0.1")) == 56
 
 
@@ -295,10 +296,40 @@ def test_a_model_flag_given_at_another_models_default_is_not_ignored():
 
 
 def test_no_gait_is_a_failed_computation_not_bad_input(capsys):
-    # valid flags, but no stable gait at 29 degrees: exit 1, one line
-    assert main(["contraction", "--slope-deg", "29", "--quiet"]) == 1
+    # valid flags, but no gait from a seed whose walker falls: exit 1, one line
+    assert main(["contraction", "--gait", "0.6", "-0.5", "0", "--quiet"]) == 1
     err = capsys.readouterr().err.strip()
-    assert "no stable gait found" in err and "\n" not in err and "error" not in err
+    assert "no gait found from --gait" in err and "(fell)" in err
+    assert "\n" not in err and "error" not in err
+
+
+def test_where_the_vhc_search_does_not_apply_shooting_finds_the_gait(capsys):
+    """With a light hip (0.5 kg) the stance angle is not monotone over the step, so the
+    VHC search's phi'' ODE is singular (`singular_phi_ode`): `gait` without `--method`
+    says so and finds the gait by shooting (stable, largest multiplier 0.398, which the
+    transverse linearization cannot confirm: `phase_not_monotone`, its multipliers and
+    their disagreement are null); `--method vhc` fails with a hint; a VHC sweep that finds
+    nothing says why."""
+    assert main(["gait", "--mass-hip", "0.5", "--json", "--quiet"]) == 0
+    captured = capsys.readouterr()
+    rec = json.loads(captured.out)
+    assert rec["method"] == "shooting" and "does not apply" in rec["method_reason"]
+    assert "does not apply" in captured.err
+    assert rec["stable"] is True and abs(rec["max_abs_multiplier"] - 0.3984) < 1e-3
+    assert rec["multipliers"] is None and rec["transverse_disagreement"] is None
+    assert main(["gait", "--mass-hip", "0.5", "--method", "vhc", "--quiet"]) == 1
+    out = capsys.readouterr().out
+    assert "singular_phi_ode" in out and "try --method shooting" in out
+    argv = ["contraction", "--mass-hip", "0.5", "--perturbations", "4", "--steps", "8"]
+    assert main(argv + ["--json", "--quiet"]) == 0
+    c = json.loads(capsys.readouterr().out)
+    x0 = rec["x0"]
+    np.testing.assert_allclose(c["gait"], [x0[0], x0[2], x0[3]], atol=1e-9)
+    argv = ["sweep", "--slope-deg", "2:3:0.5", "--mass-hip", "0.5", "--json", "--quiet"]
+    assert main(argv) == 1
+    fam = json.loads(capsys.readouterr().out)["families"]["stable"]
+    assert fam["found"] == 0 and "singular_phi_ode at 3 slopes" in fam["reason"]
+    assert "try --method shooting" in fam["reason"]
 
 
 def test_robustness_commands_analyse_the_gait_that_gait_finds(capsys):

@@ -242,8 +242,10 @@ def test_cli_gait_and_multipliers(capsys, kw, gait):
     np.testing.assert_allclose(rec["z"], gait.z, atol=1e-10)
     np.testing.assert_allclose(rec["z"], [0.18818546, -1.10958733, -0.05714811], atol=1e-8)
     np.testing.assert_allclose(rec["period"], 0.56432817, atol=1e-8)
-    ev = np.asarray(rec["multipliers"])
+    assert rec["multipliers"] is None and "Poincare" in rec["multipliers_reason"]
+    ev = np.asarray(rec["multipliers_poincare"])
     ev = np.sort(np.abs(ev[:, 0] + 1j * ev[:, 1]))
+    np.testing.assert_allclose(rec["max_abs_multiplier"], ev[-1], atol=1e-12)
     J = np.linalg.eigvals(np.asarray(jacobian_jit(kw, gait.z)))
     np.testing.assert_allclose(ev, np.sort(np.abs(J)), atol=1e-9)
 
@@ -257,6 +259,14 @@ def test_cli_gait_and_multipliers(capsys, kw, gait):
     pm = np.asarray(m["multipliers_poincare"])
     np.testing.assert_allclose(np.sort(np.abs(pm[:, 0] + 1j * pm[:, 1])), ev, atol=1e-10)
     np.testing.assert_allclose(m["max_abs_multiplier"], ev[-1], atol=1e-10)
+
+    # a model where the family is lost: the record has the compass gait's nulls, and says
+    # where the continuation stopped
+    argv = ["gait", "--model", "kneed", "--mass-shank", "5", "--json"]
+    assert main(argv) == 1
+    rec = json.loads(capsys.readouterr().out)
+    assert rec["result"] == "fell" and rec["x0"] is None and rec["residual"] is None
+    assert "last found at ms 0.4" in rec["reason"] and "--guess" in rec["reason"]
 
     for argv in (
         ["gait", "--model", "kneed", "--method", "vhc", "--slope-deg", "3"],

@@ -18,6 +18,7 @@ from ._common import (
     parse_range,
     print_json,
     progress,
+    vhc_inapplicable,
     walker_from_args,
     warn,
 )
@@ -112,7 +113,7 @@ def run_multipliers(args):
         )
     model = walker_from_args(args)
     check_figure_file(args.png, "--png")
-    why = None
+    why, method = None, args.method
     if kneed:  # its one gait family, continued from its gait at the default parameters
         fp, why = kneed_gait(model)
         found, z = result_names(fp.result), fp.z
@@ -122,14 +123,19 @@ def run_multipliers(args):
 
         # continued from the default model's gait to this model (any parameters)
         gait = find_gait(model, args.family, args.method, throw=False)
+        if not getattr(args, "method_given", True) and vhc_inapplicable(gait):
+            why = vhc_inapplicable(gait)  # the VHC search's assumption fails
+            warn(args, why)
+            method = "shooting"
+            gait = find_gait(model, args.family, method, throw=False)
         found = result_names(gait.result)
         z = model.state_to_section(gait.x_plus)
         gm = None if found != "successful" else S.gait_multipliers_jit(model, z)
     if gm is None or found != "successful":
-        hint = why if kneed else f"try --method {'shooting' if args.method == 'vhc' else 'vhc'}"
+        hint = why or f"try --method {'shooting' if method == 'vhc' else 'vhc'}"
         raise ComputationFailed(
             f"no {'kneed-walker' if kneed else args.family} gait found at "
-            f"{args.slope_deg} deg by {args.method} ({found}); {hint}"
+            f"{args.slope_deg} deg by {method} ({found}); {hint}"
         )
     pc = np.asarray(gm.poincare)
     tr = None if gm.transverse is None else np.asarray(gm.transverse)
@@ -154,12 +160,13 @@ def run_multipliers(args):
         plot_multipliers_complex(sets, labels, args.png, title=title)
     family = None if kneed else args.family  # the kneed walker: its one family
     out = {"slope_deg": args.slope_deg, "family": family, "z": np.asarray(z), **stab}
+    out["method"] = method
     out["model"] = args.model
     if args.json:
         print_json(out)
     else:
         what = "kneed-walker gait" if kneed else f"gait of the {args.family} family"
-        print(f"{what} at {args.slope_deg} deg ({args.method}): z = {np.asarray(z)}")
+        print(f"{what} at {args.slope_deg} deg ({method}): z = {np.asarray(z)}")
         for i, b in enumerate(pc):
             left = f"{tr[i]:.8f}" if trusted and tr is not None else "(not used)"
             print(f"  transverse {left}   poincare {b:.8f}")

@@ -172,11 +172,12 @@ KNEED_SEED = (0.18818546, -1.10958733, -0.05714811)
 KNEED_SLOPE_DEG = math.degrees(0.0504)
 
 
-def kneed_gait(model, guess=None):
+def kneed_gait(model, guess=None, flag=None):
     """The kneed walker's gait on `model`: Newton shooting from `guess` when given, else
     its gait at the default parameters (`KNEED_SEED`) continued to `model`
     (`vhcjax.continue_fixed_point`). **Returns:** `(fixed_point, why)`: `why` is `None`
-    on success, else one line saying where and how the search stopped."""
+    on success, else one line saying where and how the search stopped (and that the
+    command's seed `flag`, if it has one, searches from another point)."""
     import jax.numpy as jnp
 
     from .. import KneedWalker
@@ -186,7 +187,7 @@ def kneed_gait(model, guess=None):
     if guess is not None:
         fp = fixed_point_jit(model, jnp.asarray(guess, float))
         code = result_names(fp.result)
-        return fp, None if code == "successful" else f"Newton from --guess ended {code}"
+        return fp, None if code == "successful" else f"Newton from {flag} ended {code}"
     fp, reached = continue_fixed_point(KneedWalker(), KNEED_SEED, model)
     code = result_names(fp.result)
     if code == "successful":
@@ -202,8 +203,21 @@ def kneed_gait(model, guess=None):
     where = ", ".join(changed) or "the default parameters"
     return fp, (
         f"its gait, continued from the default walker (slope {KNEED_SLOPE_DEG:.4g} deg), is "
-        f"last found at {where}; the next step ends {code}. Give --guess to search from "
-        "another point"
+        f"last found at {where}; the next step ends {code}"
+        + (f". Give {flag} to search from another point" if flag else "")
+    )
+
+
+def vhc_inapplicable(gait):
+    """Why the VHC search does not apply to this model (its phi'' ODE is singular along
+    the arc, e.g. the stance angle is not monotone over the step), or `None`."""
+    from .._results import result_names
+
+    if gait.method != "vhc" or result_names(gait.result) != "singular_phi_ode":
+        return None
+    return (
+        "the VHC search does not apply here (its phi'' ODE is singular along the arc): "
+        "the gait was searched by shooting (Problem 2), which does not need the constraint"
     )
 
 
@@ -376,7 +390,8 @@ def parse_range(text, name="--slope-deg"):
     if span >= 100_000:
         raise CLIError(f"{name} {text!r} gives {span + 1:.4g} values; at most 100000")
     n = math.floor(span + 1e-9) + 1
-    return [min(start + i * step, stop) for i in range(n)]
+    # 12 significant digits: 0.9, not 0.8999999999999999 (0.3 + 2 x 0.3)
+    return [min(float(f"{start + i * step:.12g}"), stop) for i in range(n)]
 
 
 def print_json(obj):

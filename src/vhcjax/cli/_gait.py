@@ -19,6 +19,7 @@ from ._common import (
     parse_range,
     print_json,
     progress,
+    vhc_inapplicable,
     walker_from_args,
     warn,
 )
@@ -177,7 +178,16 @@ def run_gait(args):
         _check_solved_slope(args.slope_deg, "without --guess")
     guess = None if args.guess is None else jnp.asarray(args.guess)
     gait = find_gait(model, args.family, args.method, guess, throw=False)
+    switched = None
+    if not getattr(args, "method_given", True) and vhc_inapplicable(gait):
+        # the VHC search's assumption fails (its phi'' ODE is singular along the arc):
+        # the gait, if there is one, comes from shooting, which does not need it
+        switched = vhc_inapplicable(gait)
+        gait = find_gait(model, args.family, "shooting", guess, throw=False)
     rec = gait_json(gait, args.slope_deg)
+    if switched:
+        rec["method_reason"] = switched
+        warn(args, switched)
     found = rec["result"] == "successful"
     if not found:  # a failed search has no gait: no parameters, no stability
         from .._results import RESULTS
@@ -202,11 +212,12 @@ def run_gait(args):
         print_json(rec)
         return 0 if found else 1
     print(
-        f"gait search at {args.slope_deg} deg (family {args.family}, method {args.method}): "
+        f"gait search at {args.slope_deg} deg (family {args.family}, method {rec['method']}): "
         f"{rec['result']}"
     )
     if not found:
-        print(f"  no gait: {rec['reason']}")
+        hint = "" if switched else f" ({_other_method_hint(rec)})"
+        print(f"  no gait: {rec['reason'].rstrip('.')}{hint}")
         return 1
     assert rec["params"] is not None  # set to None only when not found
     for k, v in rec["params"].items():
@@ -225,6 +236,24 @@ def run_gait(args):
     return 0
 
 
+def _none_found(rows, method):
+    """Why a sweep found no gait: the result codes met, by count, and the other method."""
+    from collections import Counter
+
+    from .._results import RESULTS
+
+    codes = Counter(r["result"] for r in rows).most_common()
+    parts = [f"{name} at {n} slope{'s' if n > 1 else ''}" for name, n in codes]
+    first = RESULTS[getattr(RESULTS, codes[0][0])]
+    other = "shooting" if method == "vhc" else "vhc"
+    return f"no gait found: {', '.join(parts)} ({first.rstrip('.')}); try --method {other}"
+
+
+def _other_method_hint(rec):
+    other = "shooting" if rec.get("method") == "vhc" else "vhc"
+    return f"try --method {other}"
+
+
 def _run_kneed_gait(args):
     """The kneed walker: shooting (Newton on its step map) and Poincare multipliers."""
     import numpy as np
@@ -237,44 +266,51 @@ def _run_kneed_gait(args):
             "the kneed walker's gaits are found by shooting (its default): drop --method vhc"
         )
     model = walker_from_args(args)
-    fp, why = kneed_gait(model, args.guess)
+    fp, why = kneed_gait(model, args.guess, "--guess")
     result = result_names(fp.result)
-    rec = {
+    found = result == "successful"
+    rec = {  # the keys of the compass gait's record, and its nulls where nothing was found
         "result": result,
         "slope_deg": args.slope_deg,
-        "model": "kneed",
+        "family": None,  # the kneed walker has one family
         "method": "shooting",
-        "z": np.asarray(fp.z).tolist(),
-        "x0": np.asarray(fp.x0).tolist(),
-        "residual": float(fp.residual),
+        "model": "kneed",
+        "z": np.asarray(fp.z).tolist() if found else None,
+        "x0": np.asarray(fp.x0).tolist() if found else None,
         "iterations": int(fp.iterations),
+        "residual": float(fp.residual) if found else None,
     }
-    if result == "successful":
+    if found:
         rec["period"] = float(fp.periods[0])
     else:
         rec["reason"] = why
-    if result == "successful" and not args.no_stability:
-        # the program of `vhcjax multipliers --model kneed`: sorted by modulus
-        ev = np.asarray(gait_multipliers(model, fp.z, transverse=False).poincare)
-        radius = float(np.max(np.abs(ev)))
-        rec.update(multipliers=ev, spectral_radius=radius, stable=radius < 1.0)
+    if found and not args.no_stability:
+        # the program of `vhcjax multipliers --model kneed`, and its fields
+        from ._multiplier_fields import stability_json
+
+        rec.update(stability_json(gait_multipliers(model, fp.z, transverse=False)))
+        rec["multipliers_reason"] = (
+            "the transverse linearization is computed for the compass gait; the kneed "
+            "walker's multipliers are the Poincare map's"
+        )
     if args.json:
         print_json(rec)
     else:
         print(f"kneed walker gait at {args.slope_deg} deg (shooting): {result}")
         if why:
             print(f"  {why}")
-        if result == "successful":
+        if found:
+            assert rec["z"] is not None  # None only when not found
             print("  z = (q1, dq1, dq2) = " + ", ".join(f"{v:.8f}" for v in rec["z"]))
             line = f"  period {rec['period']:.8f} s"
-            if "multipliers" in rec:
+            if "multipliers_poincare" in rec:
                 line += (
                     ", multipliers "
-                    + ", ".join(f"{complex(v):.5f}" for v in rec["multipliers"])
+                    + ", ".join(f"{complex(*v):.5f}" for v in rec["multipliers_poincare"])
                     + f" ({'stable' if rec['stable'] else 'unstable'})"
                 )
             print(line)
-    return 0 if result == "successful" else 1
+    return 0 if found else 1
 
 
 def sweep_rows(gaits, slopes_deg):
@@ -378,6 +414,8 @@ def run_sweep(args):
     for fam, sw in results.items():
         n_ok = sum(r["result"] == "successful" for r in rows[fam])
         summary[fam] = {"found": n_ok, "total": len(slopes), "ends": sw.ends()}
+        if n_ok == 0:  # no end to report: say why nothing was found
+            summary[fam]["reason"] = _none_found(rows[fam], args.method)
     if args.json:
         print_json(
             {
@@ -392,6 +430,8 @@ def run_sweep(args):
         for fam in families:
             s = summary[fam]
             print(f"{fam}: found at {s['found']} of {s['total']} slopes")
+            if "reason" in s:
+                print(f"  {s['reason']}")
             for e in s["ends"]:
                 if e["isolated"]:
                     print(f"  not found at {e['slope_deg']:.4g} deg: {e['reason']}")

@@ -36,7 +36,7 @@ def stability_json(gm, index=None) -> dict[str, Any]:
     was not asked for or its assumptions fail, with `multipliers_reason`),
     `multipliers_poincare`, `max_abs_multiplier` and `stable` (from the Poincare
     multipliers), `stability_method`, `transverse_result` and `transverse_disagreement`
-    (relative; `null` if not computed or not finite)."""
+    (relative; `null` if not computed, not used or not finite)."""
     from .._results import result_names
     from ..stability import transverse_note
 
@@ -45,7 +45,8 @@ def stability_json(gm, index=None) -> dict[str, Any]:
     out: dict[str, Any] = {"multipliers": None if note else _pairs(gm.transverse)}
     if note:
         out["multipliers_reason"] = note
-    dis = None if gm.disagreement is None else float(gm.disagreement)
+    # the disagreement of multipliers not used (`note`) is no measure of anything
+    dis = None if gm.disagreement is None or note else float(gm.disagreement)
     out.update(
         {
             "multipliers_poincare": _pairs(gm.poincare),

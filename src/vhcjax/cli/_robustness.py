@@ -49,9 +49,9 @@ def _common(p, png_help):
 def _gait(args):
     """The gait the command analyses, or a one-line error: Newton shooting from `--gait`
     when given; else the stable gait, found as `vhcjax gait` finds it (continued from
-    the default model's gait to this model and slope; the kneed walker: from its gait
-    at the default parameters), then made a fixed point of the step map by Newton
-    shooting from there. Newton from one fixed seed would land on whichever gait is
+    the default model's gait to this model and slope, by the VHC search, or by
+    shooting where that fails; the kneed walker: from its gait at the default
+    parameters), then made a fixed point of the step map by Newton shooting from there. Newton from one fixed seed would land on whichever gait is
     nearest: at 0.5 degrees an unstable one, with a heavy hip none."""
     import jax.numpy as jnp
     import numpy as np
@@ -68,21 +68,26 @@ def _gait(args):
                 f"({result_names(fp.result)}); give a better seed"
             )
     elif getattr(args, "model", "") == "kneed":
-        fp, why = kneed_gait(model)
+        fp, why = kneed_gait(model, flag="--gait")
         if why is not None:
             raise ComputationFailed(f"no kneed-walker gait found at {args.slope_deg} deg: {why}")
     else:
         from ..gait import find_gait
 
-        gait = find_gait(model, "stable", throw=False)
-        code = result_names(gait.result)
-        fp = fixed_point_jit(model, model.state_to_section(gait.x_plus))
-        if code == "successful":
-            code = result_names(fp.result)
+        codes = []
+        for method in ("vhc", "shooting"):  # shooting where the VHC search fails
+            gait = find_gait(model, "stable", method, throw=False)
+            fp = fixed_point_jit(model, model.state_to_section(gait.x_plus))
+            code = result_names(gait.result)
+            if code == "successful":
+                code = result_names(fp.result)
+            codes.append(f"{method}: {code}")
+            if code == "successful":
+                break
         if code != "successful":
             raise ComputationFailed(
-                f"no stable gait found at slope {args.slope_deg} deg ({code}); give --gait "
-                "to analyse another one"
+                f"no stable gait found at slope {args.slope_deg} deg ({'; '.join(codes)}); "
+                "give --gait to analyse another one"
             )
     return model, fp.z, fp.x0, float(fp.periods[0]), np.asarray(fp.z)
 
@@ -580,6 +585,17 @@ def run_push(args):
             "most_fragile_phase": res.most_fragile_phase,
         }
     )
+    # Pairs that survived every push up to --max: no push failed (`falls_at` is null),
+    # and `largest` is the bound of the search, not the walker's limit.
+    ceiling = int(np.sum(~np.isfinite(np.asarray(res.threshold.hi))))
+    if ceiling:
+        reason = (
+            f"at {ceiling} of {res.threshold.hi.size} (phase, direction) pairs every push up "
+            f"to --max {args.max:g} {unit} was survived: no push failed there, and `largest` "
+            "is a lower bound; raise --max to find the limit"
+        )
+        out["falls_at_reason"] = reason
+        warn(args, reason)
     # First failing pushes that neither fell nor recovered within --steps: there the
     # threshold measures the step budget, not the walker; say so (as slope-sensitivity).
     slow = int(np.sum(res.threshold.hi_label == UNDECIDED))
