@@ -308,8 +308,8 @@ def test_where_the_vhc_search_does_not_apply_shooting_finds_the_gait(capsys):
     VHC search's phi'' ODE is singular (`singular_phi_ode`): `gait` without `--method`
     says so and finds the gait by shooting (stable, largest multiplier 0.398, which the
     transverse linearization cannot confirm: `phase_not_monotone`, its multipliers and
-    their disagreement are null); `--method vhc` fails with a hint; a VHC sweep that finds
-    nothing says why."""
+    their disagreement are null); `--method vhc` fails with a hint; the robustness
+    commands analyse the gait shooting found."""
     assert main(["gait", "--mass-hip", "0.5", "--json", "--quiet"]) == 0
     captured = capsys.readouterr()
     rec = json.loads(captured.out)
@@ -325,11 +325,18 @@ def test_where_the_vhc_search_does_not_apply_shooting_finds_the_gait(capsys):
     c = json.loads(capsys.readouterr().out)
     x0 = rec["x0"]
     np.testing.assert_allclose(c["gait"], [x0[0], x0[2], x0[3]], atol=1e-9)
-    argv = ["sweep", "--slope-deg", "2:3:0.5", "--mass-hip", "0.5", "--json", "--quiet"]
-    assert main(argv) == 1
-    fam = json.loads(capsys.readouterr().out)["families"]["stable"]
-    assert fam["found"] == 0 and "singular_phi_ode at 3 slopes" in fam["reason"]
-    assert "try --method shooting" in fam["reason"]
+
+
+def test_a_sweep_that_finds_nothing_says_why():
+    """`vhcjax sweep` with no gait at any slope has no end to report: its summary says
+    which codes it met, how often, and names the other method."""
+    from vhcjax.cli._gait import _none_found
+
+    rows = [{"result": "singular_phi_ode"}] * 3 + [{"result": "not_converged"}]
+    reason = _none_found(rows, "vhc")
+    assert reason.startswith("no gait found: singular_phi_ode at 3 slopes, not_converged at 1")
+    assert "phi'' ODE is singular" in reason and reason.endswith("try --method shooting")
+    assert _none_found([{"result": "fell"}], "shooting").endswith("try --method vhc")
 
 
 def test_robustness_commands_analyse_the_gait_that_gait_finds(capsys):
