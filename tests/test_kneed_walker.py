@@ -350,7 +350,11 @@ def test_continued_gait_at_a_heavy_hip_and_where_a_continuation_stops(kw, gait):
     assert 0.05 < float(reached.ms) < 5.0 and np.isfinite(np.asarray(fp.z)).all()
     back, _ = P.continue_fixed_point(kw, gait.z, reached)  # the part of the path it solved
     assert back.result == RESULTS.successful
-    # Newton from the default gait on the far model diverges: coded by its start's step
-    far = fixed_point_jit(KneedWalker(psi=jnp.asarray(0.0087)), gait.z)
+    # Newton from the default gait on the far model diverges (its start walks): coded
+    # not_converged at its start, with finite numbers, never `nonfinite`
+    slope = KneedWalker(psi=jnp.asarray(0.0087))
+    assert P.step_map_jit(slope, gait.z).result == RESULTS.successful
+    far = fixed_point_jit(slope, gait.z)
     assert vhcjax.result_names(far.result) == "not_converged"
+    np.testing.assert_array_equal(np.asarray(far.z), np.asarray(gait.z))
     assert np.isfinite(np.asarray(far.z)).all() and np.isfinite(float(far.residual))

@@ -84,8 +84,9 @@ def register(subparsers):
         "--method",
         choices=["vhc", "shooting"],
         default=None,
-        help="gait search: vhc = thesis Problem 1, shooting = Problem 2 (default vhc; "
-        "the VHC search needs q1 monotone along the step; the kneed walker: shooting, "
+        help="gait search: vhc = thesis Problem 1, shooting = Problem 2 (default vhc, or "
+        "shooting, said so, where the VHC search's phi'' ODE is singular: it needs q1 "
+        "monotone along the step; the kneed walker: shooting, "
         "the default there, continued from its gait at the default parameters, Poincare "
         "multipliers only)",
     )
@@ -161,6 +162,8 @@ def run_multipliers(args):
     family = None if kneed else args.family  # the kneed walker: its one family
     out = {"slope_deg": args.slope_deg, "family": family, "z": np.asarray(z), **stab}
     out["method"] = method
+    if method != args.method:
+        out["method_reason"] = why
     out["model"] = args.model
     if args.json:
         print_json(out)

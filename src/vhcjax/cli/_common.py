@@ -198,7 +198,7 @@ def kneed_gait(model, guess=None, flag=None):
         if name == "psi"
         else f"{name} {float(getattr(reached, name)):.4g}"
         for name in ("psi", "ms", "mt", "mh", "a1", "b1", "a2", "b2", "g")
-        if float(getattr(model, name)) != float(getattr(default, name))
+        if not math.isclose(float(getattr(model, name)), float(getattr(default, name)))
     ]
     where = ", ".join(changed) or "the default parameters"
     return fp, (
@@ -390,8 +390,10 @@ def parse_range(text, name="--slope-deg"):
     if span >= 100_000:
         raise CLIError(f"{name} {text!r} gives {span + 1:.4g} values; at most 100000")
     n = math.floor(span + 1e-9) + 1
-    # 12 significant digits: 0.9, not 0.8999999999999999 (0.3 + 2 x 0.3)
-    return [min(float(f"{start + i * step:.12g}"), stop) for i in range(n)]
+    # rounded to 1e-9 of a step: 0.9, not 0.8999999999999999 (0.3 + 2 x 0.3), and two
+    # points of the grid never round to one
+    digits = max(0, math.ceil(-math.log10(step)) + 9)
+    return [min(round(start + i * step, digits), stop) for i in range(n)]
 
 
 def print_json(obj):

@@ -131,8 +131,9 @@ def _family_method(p, both):
         "--method",
         default=None,
         choices=("vhc", "shooting"),
-        help="vhc = thesis Problem 1, shooting = Problem 2 (default vhc; shooting, the "
-        "kneed walker's only search, for --model kneed)",
+        help="vhc = thesis Problem 1, shooting = Problem 2 (default vhc, and `gait` "
+        "switches to shooting, saying so, where the VHC search's phi'' ODE is singular; "
+        "shooting, the kneed walker's only search, for --model kneed)",
     )
 
 
@@ -269,7 +270,7 @@ def _run_kneed_gait(args):
     fp, why = kneed_gait(model, args.guess, "--guess")
     result = result_names(fp.result)
     found = result == "successful"
-    rec = {  # the keys of the compass gait's record, and its nulls where nothing was found
+    rec = {  # the compass record's keys (and nulls where nothing was found) where they apply
         "result": result,
         "slope_deg": args.slope_deg,
         "family": None,  # the kneed walker has one family

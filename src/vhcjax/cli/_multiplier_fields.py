@@ -36,7 +36,8 @@ def stability_json(gm, index=None) -> dict[str, Any]:
     was not asked for or its assumptions fail, with `multipliers_reason`),
     `multipliers_poincare`, `max_abs_multiplier` and `stable` (from the Poincare
     multipliers), `stability_method`, `transverse_result` and `transverse_disagreement`
-    (relative; `null` if not computed, not used or not finite)."""
+    (relative; `null` if not computed, not finite, or not used for a reason other than
+    the disagreement itself)."""
     from .._results import result_names
     from ..stability import transverse_note
 
@@ -45,15 +46,17 @@ def stability_json(gm, index=None) -> dict[str, Any]:
     out: dict[str, Any] = {"multipliers": None if note else _pairs(gm.transverse)}
     if note:
         out["multipliers_reason"] = note
-    # the disagreement of multipliers not used (`note`) is no measure of anything
-    dis = None if gm.disagreement is None or note else float(gm.disagreement)
+    # multipliers not used for a reason other than their disagreement: theirs says nothing
+    code = result_names(gm.transverse_result._value)
+    unused = note is not None and code != "methods_disagree"
+    dis = None if gm.disagreement is None or unused else float(gm.disagreement)
     out.update(
         {
             "multipliers_poincare": _pairs(gm.poincare),
             "max_abs_multiplier": float(gm.max_abs),
             "stable": bool(gm.stable),
             "stability_method": "poincare_jacobian",
-            "transverse_result": result_names(gm.transverse_result._value),
+            "transverse_result": code,
             "transverse_disagreement": dis if dis is not None and math.isfinite(dis) else None,
         }
     )

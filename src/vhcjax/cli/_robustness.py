@@ -51,8 +51,9 @@ def _gait(args):
     when given; else the stable gait, found as `vhcjax gait` finds it (continued from
     the default model's gait to this model and slope, by the VHC search, or by
     shooting where that fails; the kneed walker: from its gait at the default
-    parameters), then made a fixed point of the step map by Newton shooting from there. Newton from one fixed seed would land on whichever gait is
-    nearest: at 0.5 degrees an unstable one, with a heavy hip none."""
+    parameters), then made a fixed point of the step map by Newton shooting from
+    there. Newton from one fixed seed would land on whichever gait is nearest: at 0.5
+    degrees an unstable one, with a heavy hip none."""
     import jax.numpy as jnp
     import numpy as np
 
@@ -74,21 +75,24 @@ def _gait(args):
     else:
         from ..gait import find_gait
 
-        codes = []
+        codes, fp = [], None
         for method in ("vhc", "shooting"):  # shooting where the VHC search fails
             gait = find_gait(model, "stable", method, throw=False)
-            fp = fixed_point_jit(model, model.state_to_section(gait.x_plus))
             code = result_names(gait.result)
-            if code == "successful":
-                code = result_names(fp.result)
+            if code == "successful":  # a fixed point of the step map, from the gait
+                fp = fixed_point_jit(model, model.state_to_section(gait.x_plus))
+                if result_names(fp.result) == "successful":
+                    break
+                code = f"found, but Newton shooting from it ended {result_names(fp.result)}"
             codes.append(f"{method}: {code}")
-            if code == "successful":
-                break
-        if code != "successful":
+            fp = None
+        if fp is None:
             raise ComputationFailed(
                 f"no stable gait found at slope {args.slope_deg} deg ({'; '.join(codes)}); "
                 "give --gait to analyse another one"
             )
+        if codes:  # the VHC search failed: say so, and that shooting found the gait
+            warn(args, f"the VHC search failed ({codes[0]}): the gait was found by shooting")
     return model, fp.z, fp.x0, float(fp.periods[0]), np.asarray(fp.z)
 
 
@@ -585,14 +589,15 @@ def run_push(args):
             "most_fragile_phase": res.most_fragile_phase,
         }
     )
-    # Pairs that survived every push up to --max: no push failed (`falls_at` is null),
-    # and `largest` is the bound of the search, not the walker's limit.
-    ceiling = int(np.sum(~np.isfinite(np.asarray(res.threshold.hi))))
+    # Pairs where the push of --max was survived (and none of the scan below it failed):
+    # `falls_at` is null, and `largest` is the bound of the search, not the walker's limit.
+    top = np.asarray(res.threshold.survives_max) & ~np.asarray(res.threshold.fails_min)
+    ceiling = int(np.sum(top))
     if ceiling:
         reason = (
-            f"at {ceiling} of {res.threshold.hi.size} (phase, direction) pairs every push up "
-            f"to --max {args.max:g} {unit} was survived: no push failed there, and `largest` "
-            "is a lower bound; raise --max to find the limit"
+            f"at {ceiling} of {res.threshold.hi.size} (phase, direction) pairs the push of "
+            f"--max {args.max:g} {unit} was survived (and none tried below it failed): "
+            "`largest` is a lower bound there; raise --max to find the limit"
         )
         out["falls_at_reason"] = reason
         warn(args, reason)

@@ -70,7 +70,8 @@ class FixedPoint(eqx.Module):
     - `periods`: the k step periods along the orbit.
     - `iterations`: Newton iterations taken.
     - `residual`: $\\|P^k(z) - z\\|_\\infty$ at the solution.
-    - `result`: `successful`, `not_converged`, or the failure of the last map evaluation.
+    - `result`: `successful`, `not_converged`, or the failure of the map at `z` (where
+      Newton diverged, `z` is the start).
     """
 
     z: jax.Array
@@ -173,8 +174,8 @@ multipliers_jit = stored_jit(multipliers)
 
 
 #: Largest relative change of a parameter in one step of `continue_fixed_point` at
-#: first (later steps grow to 4x that while they succeed); `_MAX_HALVINGS` halvings of
-#: a failing step before it gives up.
+#: first (later steps grow to 4x that while they succeed); it gives up where a failing
+#: step has been halved to `2**-_MAX_HALVINGS` of the first.
 _CONTINUATION_RATIO = 0.015
 _MAX_HALVINGS = 6
 
@@ -200,7 +201,8 @@ def continue_fixed_point(start, z_start, model, k=1, *, config=DEFAULT_CONFIG):
     `z_start`: a homotopy in the parameters (every float parameter at once, geometrically
     where both ends are positive), each step solved by `fixed_point_jit` from a secant
     prediction. A step moves no parameter by more than 1.5 % at first, up to 6 % while
-    steps succeed, and is halved (up to 6 times) where one fails. So a gait family is
+    steps succeed, and is halved where one fails, until it is 1/64 of the first (then
+    the continuation stops there). So a gait family is
     followed to other parameters rather than Newton from a distant seed landing on
     whichever fixed point is nearest, or on none.
 
@@ -246,7 +248,7 @@ def continue_fixed_point(start, z_start, model, k=1, *, config=DEFAULT_CONFIG):
         trial = fixed_point_jit(m, guess, k, config=config)
         if trial.result == RESULTS.successful:
             previous, s, z, fp, reached = (s, z), t, trial.z, trial, m
-            ds = min(1.5 * ds, 16 * first)
+            ds = min(1.5 * ds, 4 * first)
         else:
             ds /= 2
             if ds < first / 2**_MAX_HALVINGS:
