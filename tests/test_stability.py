@@ -142,7 +142,7 @@ def test_period_two_gait_is_a_fixed_point_of_two_simulator_steps(flip):
         ["bifurcation", "--slope-deg", "5:1:0.1"],
         ["bifurcation", "--slope-deg", "1:2"],
         ["bifurcation", "--slope-deg", "0:2:0.5"],
-        ["bifurcation", "--slope-deg", "1:2:0.5", "--record", "0"],
+        ["bifurcation", "--slope-deg", "1:2:0.5", "--record", "1"],
         ["bifurcation", "--slope-deg", "1:2:0.5", "--mass-hip", "-1"],
         ["bifurcation", "--slope-deg", "0.01:29:0.0003", "--record", "10000"],
         ["multipliers", "--slope-deg", "45"],
@@ -184,8 +184,10 @@ def test_cli_bifurcation_json_and_files(tmp_path, capsys):
         )
         == 0
     )
-    out = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
     assert out["period_doubling_slopes_deg"] == [] and out["num_fell"] == 0
+    assert out["num_aperiodic"] == 0 and "warning" not in captured.err
     rows = csv.read_text().splitlines()
     assert rows[0].startswith("slope_deg,result,pattern,period_1")
     assert len(rows) == 7
@@ -314,3 +316,17 @@ def test_library_inputs_refused_with_the_shape_or_range_expected():
         vhcjax.design("speed", ["mass-hip"], model=CompassGait(mH=100.0))
     with pytest.raises(ValueError, match="non-positive"):
         vhcjax.design("speed", ["mass-hip"], model=CompassGait(mH=-1.0))
+
+
+def test_bifurcation_aperiodic_warning_names_the_slopes():
+    """Slopes with no detected period are named in one warning, with the transient steps
+    that did not settle them (a chaotic walk or an unsettled one: the command cannot tell)."""
+    from vhcjax.cli._bifurcation import _aperiodic_message
+
+    slopes = [4.4, 4.45, 4.5, 4.55]
+    msg = _aperiodic_message(slopes, np.array([False, True, False, True]), 20, 64)
+    assert "2 of 4 slopes (4.45 to 4.55 deg)" in msg and "after 20 transient steps" in msg
+    one = _aperiodic_message(slopes, np.array([False, False, True, False]), 300, 64)
+    assert "1 of 4 slopes (4.5 deg)" in one and "\n" not in one
+    assert "period of 1 to 32 steps" in one
+    assert "period of 1 to 4 steps" in _aperiodic_message(slopes, ~np.zeros(4, bool), 9, 8)

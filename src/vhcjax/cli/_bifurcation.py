@@ -48,7 +48,10 @@ def register(subparsers):
         help="steps discarded as transient (default 300)",
     )
     p.add_argument(
-        "--record", type=count(1, 10_000), default=64, help="steps recorded (default 64)"
+        "--record",
+        type=count(2, 10_000),
+        default=64,
+        help="steps recorded (default 64; periods up to half of them are detected)",
     )
     p.add_argument(
         "--csv",
@@ -237,6 +240,9 @@ def run_bifurcation(args):
     bar.update(1)
     bar.close()
     names = result_names(diag.result)
+    aperiodic = np.asarray(diag.period_pattern) == 0
+    if aperiodic.any():
+        warn(args, _aperiodic_message(slopes, aperiodic, args.transient, args.record))
     if args.csv:
         from .._io import atomic_open
 
@@ -281,6 +287,7 @@ def run_bifurcation(args):
         "first_fall_slope_deg": float(np.degrees(psis[fell][0])) if fell.any() else None,
         "num_slopes": len(slopes),
         "num_fell": int(fell.sum()),
+        "num_aperiodic": int(aperiodic.sum()),
         "transient_steps": args.transient,
         "recorded_steps": args.record,
         "tolerance": "rtol=atol=1e-8 (FAST_CONFIG)",
@@ -291,3 +298,21 @@ def run_bifurcation(args):
         for k, v in out.items():
             print(f"{k}: {v}")
     return 0
+
+
+def _aperiodic_message(slopes, aperiodic, transient, record):
+    """The warning for slopes whose recorded step periods show no period that they can
+    show (`detect_period` 0): a chaotic walk, or one not yet settled."""
+    import numpy as np
+
+    from ..stability._multipliers import PERIOD_CANDIDATES
+
+    where = [f"{s:g}" for s in np.asarray(slopes)[np.asarray(aperiodic)]]
+    span = where[0] if len(where) == 1 else f"{where[0]} to {where[-1]}"
+    top = max(p for p in PERIOD_CANDIDATES if p < record)
+    return (
+        f"at {len(where)} of {len(slopes)} slopes ({span} deg) the {record} recorded step "
+        f"periods show no period of 1 to {top} steps: a chaotic walk, or one not settled "
+        f"after {transient} transient steps (a longer --transient tells them apart; the "
+        "simulated period-doubling slopes count settled patterns only)"
+    )

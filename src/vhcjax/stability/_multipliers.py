@@ -729,7 +729,11 @@ def bifurcation_diagram(
     return BifurcationDiagram(psis, periods, fell, codes, nd)
 
 
-def detect_period(periods, tol=1e-5, candidates=(1, 2, 4, 8, 16, 32)):
+#: The periods (in steps) that `detect_period` looks for.
+PERIOD_CANDIDATES = (1, 2, 4, 8, 16, 32)
+
+
+def detect_period(periods, tol=1e-5, candidates=PERIOD_CANDIDATES):
     """Smallest p in `candidates` with `periods[i + p] == periods[i]` (within `tol` s)
     for all recorded i; 0 if none (aperiodic, e.g. chaotic, or not settled)."""
     periods = np.asarray(periods)
