@@ -350,6 +350,9 @@ def test_continued_gait_at_a_heavy_hip_and_where_a_continuation_stops(kw, gait):
     assert 0.05 < float(reached.ms) < 5.0 and np.isfinite(np.asarray(fp.z)).all()
     back, _ = P.continue_fixed_point(kw, gait.z, reached)  # the part of the path it solved
     assert back.result == RESULTS.successful
+    same, at = P.continue_fixed_point(kw, gait.z, kw)  # no way to go: the start's gait
+    assert same.result == RESULTS.successful and at is kw
+    np.testing.assert_allclose(np.asarray(same.z), np.asarray(gait.z), atol=1e-10)
     # Newton from the default gait on the far model diverges (its start walks): coded
     # not_converged at its start, with finite numbers, never `nonfinite`
     slope = KneedWalker(psi=jnp.asarray(0.0087))

@@ -240,6 +240,8 @@ def continue_fixed_point(start, z_start, model, k=1, *, config=DEFAULT_CONFIG):
     fp = fixed_point_jit(start, jnp.asarray(z_start, float), k, config=config)
     if fp.result != RESULTS.successful:
         return fp, start
+    if spread == 0.0:  # `model` is `start`
+        return fp, model
     s, ds, z, previous, reached = 0.0, first, fp.z, None, start
     while s < 1.0:
         t = min(1.0, s + ds)
