@@ -199,6 +199,14 @@ def _unwritable_cases(tmp_path):
         ("slope-sensitivity", "--png", "xyz"),
     ]:  # a figure format matplotlib does not write
         cases.append([cmd, *REQUIRED.get(cmd, []), flag, str(tmp_path / f"figure.{ext}")])
+    for cmd, flag in [("sweep", "--png"), ("bifurcation", "--png-multipliers")]:
+        # no suffix: matplotlib would write another file (name.png)
+        cases.append([cmd, *REQUIRED.get(cmd, []), flag, str(tmp_path / "figure")])
+    same = str(tmp_path / "same.png")  # two outputs in one file: the second would win
+    cases.append(["sweep", *REQUIRED["sweep"], "--csv", same, "--png", same])
+    cases.append(
+        ["bifurcation", *REQUIRED["bifurcation"], "--png", same, "--png-multipliers", same]
+    )
     for cmd, flag in [("simulate", "--plots"), ("reproduce", "--out")]:
         for path in ("/proc/vhcjax-test", str(tmp_path / "file")):
             cases.append([cmd, flag, path])

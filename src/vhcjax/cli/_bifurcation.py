@@ -57,7 +57,7 @@ def register(subparsers):
         "--csv",
         metavar="FILE",
         help="write slope_deg, result, pattern, period_1..period_RECORD (pattern: "
-        "steps per repetition, 0 aperiodic, -1 fell)",
+        "steps per repetition, 0 aperiodic, -1 fell: its periods empty)",
     )
     p.add_argument("--png", metavar="FILE", help="save the bifurcation diagram")
     p.add_argument(
@@ -203,8 +203,9 @@ def run_bifurcation(args):
             f"recorded periods; at most {MAX_RECORDED:,} (fewer slopes or a shorter --record)"
         )
     model = model_from_args(args, slope_deg=slopes[0])
-    for flag in ("csv", "png", "png_multipliers"):
-        check_output_file(getattr(args, flag), "--" + flag.replace("_", "-"))
+    check_output_file(args.csv, "--csv")
+    for flag in ("png", "png_multipliers"):
+        check_figure_file(getattr(args, flag), "--" + flag.replace("_", "-"))
     psis = np.radians(slopes)
     bar = progress(total=5, desc="bifurcation")
     fam = S.period1_family(psis, "stable", model=model)
@@ -253,7 +254,9 @@ def run_bifurcation(args):
                 + "\n"
             )
             for s, r, nd, per in zip(slopes, names, diag.period_pattern, diag.periods):
-                f.write(f"{s:.10g},{r},{nd}," + ",".join(f"{x:.12g}" for x in per) + "\n")
+                # a walker that fell recorded no periods: empty cells
+                cells = ("" if nd < 0 else f"{x:.12g}" for x in per)
+                f.write(f"{s:.10g},{r},{nd}," + ",".join(cells) + "\n")
     if args.png:
         from ..plotting import plot_bifurcation
 
@@ -284,7 +287,7 @@ def run_bifurcation(args):
         "period_doubling_slopes_deg_simulation": [
             math.degrees(f) for f in S.period_doubling_slopes_from_diagram(diag)
         ],
-        "first_fall_slope_deg": float(np.degrees(psis[fell][0])) if fell.any() else None,
+        "first_fall_slope_deg": slopes[int(np.argmax(fell))] if fell.any() else None,
         "num_slopes": len(slopes),
         "num_fell": int(fell.sum()),
         "num_aperiodic": int(aperiodic.sum()),

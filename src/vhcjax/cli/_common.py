@@ -113,19 +113,37 @@ def check_output_file(path, flag):
         os.remove(path)
 
 
+#: The options that name an output file, as `args` attributes.
+OUTPUT_FILES = ("csv", "png", "png_multipliers", "animate")
+
+
+def check_distinct_outputs(args):
+    """Refuse two output options naming one file (the second would overwrite the first)."""
+    seen = {}
+    for name in OUTPUT_FILES:
+        path = getattr(args, name, None)
+        if path is None:
+            continue
+        flag = "--" + name.replace("_", "-")
+        key = os.path.realpath(path)
+        if key in seen:
+            raise CLIError(f"{seen[key]} and {flag} name the same file {path!r}")
+        seen[key] = flag
+
+
 def check_figure_file(path, flag):
-    """`check_output_file` for a figure: also a suffix that matplotlib writes (none: PNG)."""
+    """`check_output_file` for a figure: also a suffix that matplotlib writes (without
+    one, matplotlib would write another file, `path` + ".png")."""
     if path is None:
         return
-    fmt = os.path.splitext(path)[1].lstrip(".").lower()
-    if fmt:
-        from matplotlib.backend_bases import FigureCanvasBase
+    from matplotlib.backend_bases import FigureCanvasBase
 
-        known = FigureCanvasBase.get_supported_filetypes()
-        if fmt not in known:
-            raise CLIError(
-                f"{flag} {path!r}: a figure is written as {', '.join(sorted(known))}, not {fmt!r}"
-            )
+    known = ", ".join(sorted(FigureCanvasBase.get_supported_filetypes()))
+    fmt = os.path.splitext(path)[1].lstrip(".").lower()
+    if not fmt:
+        raise CLIError(f"{flag} {path!r}: name the format by a suffix ({known})")
+    if fmt not in FigureCanvasBase.get_supported_filetypes():
+        raise CLIError(f"{flag} {path!r}: a figure is written as {known}, not {fmt!r}")
     check_output_file(path, flag)
 
 

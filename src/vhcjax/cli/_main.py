@@ -11,7 +11,14 @@ import sys
 import threading
 
 from .._io import remove_pending
-from ._common import QUIET, ArgumentError, CLIError, ComputationFailed, Parser
+from ._common import (
+    QUIET,
+    ArgumentError,
+    CLIError,
+    ComputationFailed,
+    Parser,
+    check_distinct_outputs,
+)
 
 # Subcommand modules, in the order they appear in `vhcjax --help`.
 SUBCOMMANDS = [
@@ -108,6 +115,7 @@ def main(argv=None):
     if not QUIET["on"]:
         _first_run_note()
     try:
+        check_distinct_outputs(args)
         return int(args.func(args) or 0)
     except ComputationFailed as e:
         print(f"vhcjax {args.command}: {e}", file=sys.stderr)
