@@ -158,6 +158,10 @@ def flip_slopes(
 
     **Returns:** a `FlipScan`.
     """
+    if not (math.isfinite(step) and step > 0 and math.isfinite(psi_max)):
+        raise ValueError(
+            f"flip_slopes: step must be positive and psi_max finite, got {step}, {psi_max}"
+        )
     model = detach(model)
     z_start = np.asarray(z_start, float)
     B = z_start.shape[0]

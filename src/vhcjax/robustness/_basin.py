@@ -168,6 +168,8 @@ def basin_slice(
         )
     if int(nx) < 1 or int(ny) < 1:
         raise ValueError(f"basin_slice: shape must be two positive integers, got {shape}")
+    if int(num_steps) < 1:
+        raise ValueError(f"basin_slice: num_steps must be at least 1, got {num_steps}")
     if len(set(axes)) != 2 or not all(0 <= a < z_star.shape[0] for a in axes):
         raise ValueError(f"basin_slice: axes must be two distinct section coordinates, got {axes}")
     require_gait(model, z_star, "basin_slice")

@@ -9,6 +9,8 @@ from small random perturbations (least squares on $\\log \\|z_k - z^*\\|$), inde
 the Jacobian.
 """
 
+import math
+
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -111,6 +113,8 @@ def contraction(
         )
     if int(num_perturbations) < 1:
         raise ValueError(f"contraction: num_perturbations must be >= 1, got {num_perturbations}")
+    if not (math.isfinite(scale) and scale > 0):
+        raise ValueError(f"contraction: scale must be positive and finite, got {scale}")
     z_star = jnp.asarray(z_star, dtype=float)
     key = jax.random.PRNGKey(0) if key is None else key
     J, mr = _jacobian_jit(model, z_star, config)

@@ -82,6 +82,15 @@ def recover(
     """
     x0 = jnp.asarray(x0, dtype=float)
     x_star = jnp.asarray(x_star, dtype=float)
+    if x0.ndim != 2 or x0.shape[-1:] != x_star.shape:
+        raise ValueError(
+            f"recover: x0 must have shape (batch, {x_star.shape[-1]}) (states of the gait's "
+            f"size), got {x0.shape}"
+        )
+    if int(num_steps) < 1 or int(max_period) < 1:
+        raise ValueError(
+            f"recover: num_steps and max_period must be at least 1, got {num_steps}, {max_period}"
+        )
     B = x0.shape[0]
     H = max_period + 1
     dist0 = jnp.max(jnp.abs(x0 - x_star), axis=-1)

@@ -704,8 +704,18 @@ def bifurcation_diagram(
     devices).
     """
     model = CompassGait() if model is None else model
-    psis = np.asarray(psis, float)
+    psis = np.asarray(psis, float).reshape(-1)
     zs = np.asarray(zs, float)
+    if zs.ndim != 2 or len(zs) != len(psis):
+        raise ValueError(
+            f"bifurcation_diagram: one gait per slope: zs must have shape ({len(psis)}, n), "
+            f"got {zs.shape}"
+        )
+    if int(num_transient) < 0 or int(num_record) < 1:
+        raise ValueError(
+            "bifurcation_diagram: num_transient must be at least 0 and num_record at least 1, "
+            f"got {num_transient}, {num_record}"
+        )
     x0s = np.stack(
         [
             np.asarray(with_slope(model, p).section_to_state(jnp.asarray(z)))
