@@ -102,6 +102,7 @@ def test_cli_says_when_the_step_budget_decides_the_largest_push(capsys):
     assert max(max(row) for row in out["largest"]) < 1.0  # N s (0.89 at 30 steps)
     assert "at 8 of 8" in out["largest_reason"] and "raise --steps" in out["largest_reason"]
     assert out["gait_stable"] is True and out["gait_spectral_radius"] < 1.0
+    assert all(p in (0.0, 0.5) for p in out["most_fragile_phase"])
     # every push up to --max survived: `largest` is the search bound, and it says so
     assert main(["push", "--phases", "2", "--steps", "3", "--max", "0.001", "--json"]) == 0
     captured = capsys.readouterr()
@@ -109,6 +110,8 @@ def test_cli_says_when_the_step_budget_decides_the_largest_push(capsys):
     assert all(v is None for row in out["falls_at"] for v in row)
     assert all(v == 0.001 for row in out["largest"] for v in row)
     assert "at 8 of 8" in out["falls_at_reason"] and "raise --max" in captured.err
+    # and no phase is known to be more fragile than another
+    assert out["most_fragile_phase"] == [None] * 4 and "most_fragile_phase_reason" in out
     assert "null_fields" not in out
 
 

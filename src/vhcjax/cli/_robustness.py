@@ -601,6 +601,11 @@ def run_push(args):
         )
         out["falls_at_reason"] = reason
         warn(args, reason)
+    if not np.isfinite(res.most_fragile_phase).all():
+        out["most_fragile_phase_reason"] = (
+            "null for a direction where no push survived at any phase, or where every "
+            "phase survived --max: no phase is known to be the most fragile"
+        )
     # First failing pushes that neither fell nor recovered within --steps: there the
     # threshold measures the step budget, not the walker; say so (as slope-sensitivity).
     slow = int(np.sum(res.threshold.hi_label == UNDECIDED))
@@ -634,10 +639,16 @@ def run_push(args):
             if col.size == 0:
                 print(f"direction {a:g} deg: no push survived at any phase, not even 0 {unit}")
                 continue
+            fragile = res.most_fragile_phase[j]
             print(
                 f"direction {a:g} deg: largest push survived {col.min():.4g}-"
-                f"{col.max():.4g} {unit}; most fragile at phase "
-                f"{res.most_fragile_phase[j]:.2f}"
+                f"{col.max():.4g} {unit}; "
+                + (
+                    f"most fragile at phase {fragile:.2f}"
+                    if np.isfinite(fragile)
+                    else f"no phase known as the most fragile (--max {args.max:g} {unit} "
+                    "bounds the search)"
+                )
             )
         if args.check:
             print(

@@ -282,7 +282,7 @@ class PushThresholds(eqx.Module):
       flattened row-major: `lo` survives, `hi` does not.
     - `largest`: `lo` reshaped to `(len(phases), len(angles))`.
     - `most_fragile_phase`: per direction, the phase with the smallest `largest` (NaN
-      where no push survived at any phase).
+      where no push survived at any phase, or where every phase survived `p_max`).
     - `duration`: 0 for impulses (N s), else the pulse duration (s) (forces in N).
     """
 
@@ -348,10 +348,13 @@ def max_push(
         progress=progress,
     )
     largest = th.lo.reshape(S.shape)
-    # per direction; NaN where no phase has a finite largest push (none survived)
+    # per direction, among the pairs with a threshold found: NaN where none survived a
+    # push, or all survived `p_max` (then no phase is known to be more fragile)
+    top = (np.asarray(th.survives_max) & ~np.asarray(th.fails_min)).reshape(S.shape)
+    known = np.isfinite(largest) & ~top
     fragile = np.where(
-        np.isfinite(largest).any(axis=0),
-        phases[np.argmin(np.where(np.isfinite(largest), largest, np.inf), axis=0)],
+        known.any(axis=0),
+        phases[np.argmin(np.where(known, largest, np.inf), axis=0)],
         np.nan,
     )
     return PushThresholds(phases, angles, th, largest, fragile, float(duration))
