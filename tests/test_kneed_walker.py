@@ -239,6 +239,7 @@ def test_cli_gait_and_multipliers(capsys, kw, gait):
         ["gait", "--model", "kneed", "--method", "shooting", "--slope-deg", SLOPE_DEG, "--json"],
     )
     assert rec["result"] == "successful" and rec["stable"] is True
+    assert rec["params"] is None and "compass gait" in rec["params_reason"]
     np.testing.assert_allclose(rec["z"], gait.z, atol=1e-10)
     np.testing.assert_allclose(rec["z"], [0.18818546, -1.10958733, -0.05714811], atol=1e-8)
     np.testing.assert_allclose(rec["period"], 0.56432817, atol=1e-8)
@@ -266,6 +267,7 @@ def test_cli_gait_and_multipliers(capsys, kw, gait):
     assert main(argv) == 1
     rec = json.loads(capsys.readouterr().out)
     assert rec["result"] == "fell" and rec["x0"] is None and rec["residual"] is None
+    assert rec["params"] is None
     assert "last found at ms 0.4" in rec["reason"] and "--guess" in rec["reason"]
 
     for argv in (

@@ -335,7 +335,7 @@ def check_finite(name, *values):
 def check_slope_deg(value, name="--slope-deg"):
     check_finite(name, value)
     if not 0.0 < value < 30.0:
-        raise CLIError(f"{name} must be in (0, 30) degrees, got {value}")
+        raise CLIError(f"{name} must be in (0, 30) degrees, got {value:.6g}")
 
 
 def model_from_args(args, slope_deg=None):
@@ -409,9 +409,9 @@ def parse_range(text, name="--slope-deg"):
         raise CLIError(f"{name} {text!r} gives {span + 1:.4g} values; at most 100000")
     n = math.floor(span + 1e-9) + 1
     # rounded to 1e-9 of a step: 0.9, not 0.8999999999999999 (0.3 + 2 x 0.3), and two
-    # points of the grid never round to one
+    # points of the grid never round to one; START as given
     digits = max(0, math.ceil(-math.log10(step)) + 9)
-    return [min(round(start + i * step, digits), stop) for i in range(n)]
+    return [start] + [min(round(start + i * step, digits), stop) for i in range(1, n)]
 
 
 def print_json(obj):

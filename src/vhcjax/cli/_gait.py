@@ -278,6 +278,8 @@ def _run_kneed_gait(args):
         "model": "kneed",
         "z": np.asarray(fp.z).tolist() if found else None,
         "x0": np.asarray(fp.x0).tolist() if found else None,
+        "params": None,
+        "params_reason": "the gait parameters of (5.2) are the compass gait's: see z and x0",
         "iterations": int(fp.iterations),
         "residual": float(fp.residual) if found else None,
     }

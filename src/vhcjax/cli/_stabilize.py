@@ -81,7 +81,10 @@ def register(subparsers):
         "--basin", action="store_true", help="basin slices over (q1, dq1) with and without feedback"
     )
     p.add_argument(
-        "--basin-grid", type=count(2, 400), default=15, help="basin grid points per axis"
+        "--basin-grid",
+        type=count(2, 400),
+        default=None,
+        help="basin grid points per axis, with --basin (default 15)",
     )
     p.add_argument("--json", action="store_true", help="print the results as one JSON object")
     p.add_argument(
@@ -111,7 +114,8 @@ def _numbers(flag, text, n, names):
     except ValueError:
         raise CLIError(f"{flag} must be comma-separated numbers, got {text!r}") from None
     if len(values) != n:
-        raise CLIError(f"{flag} needs {n} weights ({', '.join(names)}), got {len(values)}")
+        what = "weight" if n == 1 else "weights"
+        raise CLIError(f"{flag} needs {n} {what} ({', '.join(names)}), got {len(values)}")
     check_finite(flag, *values)
     return values
 
@@ -150,8 +154,10 @@ def _check(args):
         raise CLIError(f"--perturbation must be >= 0, got {args.perturbation}")
     if args.steps < 1:
         raise CLIError(f"--steps must be >= 1, got {args.steps}")
-    if args.basin_grid < 2:
-        raise CLIError(f"--basin-grid must be >= 2, got {args.basin_grid}")
+    if args.basin_grid is not None and not args.basin:
+        raise CLIError("--basin-grid sets the grid of --basin: give --basin too")
+    if args.basin_grid is None:
+        args.basin_grid = 15
     return weights
 
 

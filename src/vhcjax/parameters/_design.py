@@ -277,7 +277,13 @@ def design(
     guess = np.asarray(g0.z)
     v, grad, gait = _evaluate(base, vary, x, objective, guess)
     if not np.isfinite(v):
-        raise ValueError("the objective is not defined at the starting parameters")
+        why = ""
+        if objective == "flip-slope":
+            why = (
+                f": the gait at {math.degrees(float(base.psi)):.4g} deg is past its flip "
+                "already, or has none below 12 deg (start at a smaller slope)"
+            )
+        raise ValueError("the objective is not defined at the starting parameters" + why)
     guess = np.asarray(gait.z)
     scale = max(np.abs(grad * (hi - lo)).max(), 1e-12)
 
