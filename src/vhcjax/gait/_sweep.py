@@ -228,7 +228,10 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
     import numpy as np
 
     _check(family, method)
-    psi = np.asarray(slopes, dtype=float).reshape(-1)
+    psi = np.asarray(slopes, dtype=float)
+    if psi.ndim > 1:
+        raise ValueError(f"sweep: slopes must be one-dimensional, got shape {psi.shape}")
+    psi = psi.reshape(-1)
     if psi.size == 0:
         raise ValueError("sweep needs at least one slope")
     if not np.all(np.isfinite(psi)) or np.any(psi <= 0):

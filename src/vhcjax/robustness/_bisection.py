@@ -65,6 +65,16 @@ def bisect_threshold(survives, lo_min, hi_max, *, iterations=20, scan=0, progres
     hi = np.asarray(hi_max, dtype=float)
     lo, hi = np.broadcast_arrays(lo, hi)
     lo, hi = lo.copy(), hi.copy()
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all() and (hi > lo).all()):
+        raise ValueError(
+            "bisect_threshold: the search interval [lo_min, hi_max] must be finite and not "
+            f"empty, got [{lo.min() if lo.size else lo}, {hi.min() if hi.size else hi}]"
+        )
+    if int(iterations) < 1 or int(scan) < 0:
+        raise ValueError(
+            f"bisect_threshold: iterations must be at least 1 and scan at least 0, got "
+            f"{iterations}, {scan}"
+        )
     s_lo, _ = _evaluate(survives, lo)
     s_hi, label = _evaluate(survives, hi)
     if scan > 0:
