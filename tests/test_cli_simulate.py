@@ -98,7 +98,7 @@ def test_installed_entry_point_subprocess():
     assert proc.stdout == ""
     assert (
         proc.stderr.strip()
-        == "vhcjax simulate: error: --slope-deg must be in (0, 30) degrees, got 45.0"
+        == "vhcjax simulate: error: --slope-deg must be in (0, 30) degrees, got 45"
     )
 
 

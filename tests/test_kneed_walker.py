@@ -322,7 +322,7 @@ def test_cli_basin(capsys, kw, gait):
 # ---- other parameters: the gait continued from the default walker --------------------
 
 
-def test_continued_gait_at_a_heavy_hip_and_where_a_continuation_stops(kw, gait):
+def test_continued_gait_at_a_heavy_hip_and_where_a_continuation_stops(kw, gait, monkeypatch):
     """`continue_fixed_point` follows the gait family from the default walker to a hip 100
     times heavier: its fixed point returns after 100 simulated steps, and a plain
     continuation in 12.5 % steps of the hip mass (secant predictor) lands on it too. Newton
@@ -352,8 +352,11 @@ def test_continued_gait_at_a_heavy_hip_and_where_a_continuation_stops(kw, gait):
     assert 0.05 < float(reached.ms) < 5.0 and np.isfinite(np.asarray(fp.z)).all()
     back, _ = P.continue_fixed_point(kw, gait.z, reached)  # the part of the path it solved
     assert back.result == RESULTS.successful
-    same, at = P.continue_fixed_point(kw, gait.z, kw)  # no way to go: the start's gait
-    assert same.result == RESULTS.successful and at is kw
+    searches = []  # no way to go: the start's gait, from one search
+    real = P.fixed_point_jit
+    monkeypatch.setattr(P, "fixed_point_jit", lambda *a, **k: searches.append(1) or real(*a, **k))
+    same, at = P.continue_fixed_point(kw, gait.z, kw)
+    assert same.result == RESULTS.successful and at is kw and len(searches) == 1
     np.testing.assert_allclose(np.asarray(same.z), np.asarray(gait.z), atol=1e-10)
     # Newton from the default gait on the far model diverges (its start walks): coded
     # not_converged at its start, with finite numbers, never `nonfinite`

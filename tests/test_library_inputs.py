@@ -25,6 +25,7 @@ X3 = np.asarray(M3.section_to_state(Z3))
         (lambda: vj.continue_fixed_point(M3, Z3[:2], vj.CompassGait(psi=0.06)), "section"),
         (lambda: vj.continue_fixed_point(M3, Z3, M3, k=0), "positive integer"),
         (lambda: vj.bifurcation_diagram([0.05], Z3[None], num_record=0), "num_record"),
+        (lambda: vj.bifurcation_diagram([0.05], Z3[None], num_record=1), "num_record"),
         (lambda: vj.bifurcation_diagram([0.05], Z3[None], num_transient=-1), "num_transient"),
         (lambda: vj.bifurcation_diagram([0.05, 0.06], Z3[None]), "one gait per slope"),
         (lambda: vj.basin_slice(M3, Z3, shape=(2, 2), num_steps=0), "num_steps"),

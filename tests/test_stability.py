@@ -188,6 +188,10 @@ def test_cli_bifurcation_json_and_files(tmp_path, capsys):
     out = json.loads(captured.out)
     assert out["period_doubling_slopes_deg"] == [] and out["num_fell"] == 0
     assert out["num_aperiodic"] == 0 and "warning" not in captured.err
+    assert (
+        out["first_fall_slope_deg"] is None
+        and "no walker fell" in out["first_fall_slope_deg_reason"]
+    )
     rows = csv.read_text().splitlines()
     assert rows[0].startswith("slope_deg,result,pattern,period_1")
     assert len(rows) == 7
@@ -328,5 +332,6 @@ def test_bifurcation_aperiodic_warning_names_the_slopes():
     assert "2 of 4 slopes (4.45 to 4.55 deg)" in msg and "after 20 transient steps" in msg
     one = _aperiodic_message(slopes, np.array([False, False, True, False]), 300, 64)
     assert "1 of 4 slopes (4.5 deg)" in one and "\n" not in one
-    assert "period of 1 to 32 steps" in one
-    assert "period of 1 to 4 steps" in _aperiodic_message(slopes, ~np.zeros(4, bool), 9, 8)
+    assert "no period of 1, 2, 4, 8, 16 or 32 steps" in one
+    assert "no period of 1, 2 or 4 steps" in _aperiodic_message(slopes, ~np.zeros(4, bool), 9, 8)
+    assert "no period of 1 step:" in _aperiodic_message(slopes, ~np.zeros(4, bool), 9, 2)

@@ -51,13 +51,14 @@ def register(subparsers):
         "--record",
         type=count(2, 10_000),
         default=64,
-        help="steps recorded (default 64; periods up to half of them are detected)",
+        help="steps recorded (default 64); patterns of 1, 2, 4, ..., 32 steps shorter than "
+        "RECORD are detected",
     )
     p.add_argument(
         "--csv",
         metavar="FILE",
         help="write slope_deg, result, pattern, period_1..period_RECORD (pattern: "
-        "steps per repetition, 0 aperiodic, -1 fell: its periods empty)",
+        "steps per repetition, 0 aperiodic, -1 fell: no periods after the fall)",
     )
     p.add_argument("--png", metavar="FILE", help="save the bifurcation diagram")
     p.add_argument(
@@ -254,8 +255,8 @@ def run_bifurcation(args):
                 + "\n"
             )
             for s, r, nd, per in zip(slopes, names, diag.period_pattern, diag.periods):
-                # a walker that fell recorded no periods: empty cells
-                cells = ("" if nd < 0 else f"{x:.12g}" for x in per)
+                # the steps after a fall have no period (zero): empty cells
+                cells = ("" if nd < 0 and x == 0 else f"{x:.12g}" for x in per)
                 f.write(f"{s:.10g},{r},{nd}," + ",".join(cells) + "\n")
     if args.png:
         from ..plotting import plot_bifurcation
@@ -295,6 +296,8 @@ def run_bifurcation(args):
         "recorded_steps": args.record,
         "tolerance": "rtol=atol=1e-8 (FAST_CONFIG)",
     }
+    if not fell.any():
+        out["first_fall_slope_deg_reason"] = "no walker fell at any slope"
     if args.json:
         print_json(out)
     else:
@@ -312,10 +315,12 @@ def _aperiodic_message(slopes, aperiodic, transient, record):
 
     where = [f"{s:g}" for s in np.asarray(slopes)[np.asarray(aperiodic)]]
     span = where[0] if len(where) == 1 else f"{where[0]} to {where[-1]}"
-    top = max(p for p in PERIOD_CANDIDATES if p < record)
+    tried = [str(p) for p in PERIOD_CANDIDATES if p < record]
+    tried = "1 step" if len(tried) == 1 else ", ".join(tried[:-1]) + f" or {tried[-1]} steps"
     return (
         f"at {len(where)} of {len(slopes)} slopes ({span} deg) the {record} recorded step "
-        f"periods show no period of 1 to {top} steps: a chaotic walk, or one not settled "
+        f"periods repeat with no period of {tried}: a chaotic walk, another period, "
+        "or a walk not settled "
         f"after {transient} transient steps (a longer --transient tells them apart; the "
         "simulated period-doubling slopes count settled patterns only)"
     )

@@ -8,7 +8,7 @@ variational equations and the event-time tangent); its Jacobian gives the Floque
 multipliers of a gait, independently of the transverse linearization (thesis ch. 6).
 """
 
-import numbers
+import operator
 
 import equinox as eqx
 import jax
@@ -32,9 +32,13 @@ class MapResult(eqx.Module):
 
 def _check_k(k):
     """`k`, the number of steps of the map: a positive integer (a compile-time constant)."""
-    if isinstance(k, bool) or not isinstance(k, numbers.Integral) or k < 1:
+    try:
+        n = operator.index(k)  # an int, a numpy integer, a 0-d integer array
+    except TypeError:
+        n = 0
+    if isinstance(k, bool) or n < 1:
         raise ValueError(f"k (steps of the map) must be a positive integer, got {k!r}")
-    return int(k)
+    return n
 
 
 def step_map(model, z, k=1, config=DEFAULT_CONFIG):
@@ -154,7 +158,8 @@ def _with_derivatives(params, fp, k, config):
 def fixed_point(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, config=DEFAULT_CONFIG):
     """Solve $P^k(z) = z$ by Newton (optimistix) with forward-mode Jacobians (Problem 2).
 
-    Never raises: inspect `result` (use under `vmap` freely). Differentiable with respect
+    A failed search raises nothing: inspect `result` (use under `vmap` freely); only a
+    `k` that is not a positive integer is a `ValueError`. Differentiable with respect
     to the model's parameters (`jax.jvp`, `jax.jacfwd`, `jax.grad`, `jax.jacrev`) by the
     implicit function theorem at the fixed point (`vhcjax.solvers.implicit_outputs`),
     never through the Newton iterations; a failed search has zero derivatives.

@@ -30,7 +30,7 @@ from .._results import RESULTS, result_names
 from ..gait import find_gait
 from ..models import CompassGait
 from ..stability import gait_spectrum
-from ._flip import flip_slope
+from ._flip import flip_slope, flip_slopes
 
 #: The parameters a design may vary, by their CLI names, and the model leaves they set.
 PARAMETERS = {
@@ -278,11 +278,10 @@ def design(
     v, grad, gait = _evaluate(base, vary, x, objective, guess)
     if not np.isfinite(v):
         why = ""
-        if objective == "flip-slope":
-            why = (
-                f": the gait at {math.degrees(float(base.psi)):.4g} deg is past its flip "
-                "already, or has none below 12 deg (start at a smaller slope)"
-            )
+        if objective == "flip-slope":  # the scan says why it found no flip
+            m = with_parameters(base, vary, x)
+            scan = flip_slopes(m, np.asarray(gait.z)[None], float(m.psi))
+            why = f": {scan.reason[0]}" if scan.reason[0] else ""
         raise ValueError("the objective is not defined at the starting parameters" + why)
     guess = np.asarray(gait.z)
     scale = max(np.abs(grad * (hi - lo)).max(), 1e-12)

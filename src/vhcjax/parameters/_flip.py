@@ -160,7 +160,7 @@ def flip_slopes(
     """
     if not (math.isfinite(step) and step > 0 and math.isfinite(psi_max)):
         raise ValueError(
-            f"flip_slopes: step must be positive and psi_max finite, got {step}, {psi_max}"
+            f"flip slope scan: step must be positive and psi_max finite, got {step}, {psi_max}"
         )
     model = detach(model)
     z_start = np.asarray(z_start, float)

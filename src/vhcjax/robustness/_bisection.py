@@ -65,10 +65,12 @@ def bisect_threshold(survives, lo_min, hi_max, *, iterations=20, scan=0, progres
     hi = np.asarray(hi_max, dtype=float)
     lo, hi = np.broadcast_arrays(lo, hi)
     lo, hi = lo.copy(), hi.copy()
-    if not (np.isfinite(lo).all() and np.isfinite(hi).all() and (hi > lo).all()):
+    bad = ~(np.isfinite(lo) & np.isfinite(hi) & (hi > lo))
+    if bad.any():
+        i = np.unravel_index(np.argmax(bad), bad.shape)
         raise ValueError(
-            "bisect_threshold: the search interval [lo_min, hi_max] must be finite and not "
-            f"empty, got [{lo.min() if lo.size else lo}, {hi.min() if hi.size else hi}]"
+            "the search interval of a threshold (0 to the largest magnitude tried) must be "
+            f"finite and not empty, got [{lo[i]:g}, {hi[i]:g}]"
         )
     if int(iterations) < 1 or int(scan) < 0:
         raise ValueError(

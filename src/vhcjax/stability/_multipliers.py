@@ -711,9 +711,9 @@ def bifurcation_diagram(
             f"bifurcation_diagram: one gait per slope: zs must have shape ({len(psis)}, n), "
             f"got {zs.shape}"
         )
-    if int(num_transient) < 0 or int(num_record) < 1:
+    if int(num_transient) < 0 or int(num_record) < 2:  # one period shows no pattern
         raise ValueError(
-            "bifurcation_diagram: num_transient must be at least 0 and num_record at least 1, "
+            "bifurcation_diagram: num_transient must be at least 0 and num_record at least 2, "
             f"got {num_transient}, {num_record}"
         )
     x0s = np.stack(
