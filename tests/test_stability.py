@@ -209,6 +209,37 @@ def test_cli_bifurcation_json_and_files(tmp_path, capsys):
 
 
 @pytest.mark.slow
+def test_cli_bifurcation_simulates_only_where_there_is_a_gait(tmp_path, capsys, monkeypatch):
+    """A slope without a period-1 gait (a stand-in: the search's result replaced by
+    `not_converged` at 3 degrees) is not simulated: its CSV row gives the search's result
+    and no pattern, a warning names it, and it counts neither as a fall nor in the
+    diagram."""
+    import equinox as eqx
+
+    from vhcjax.cli import main
+
+    real = S.period1_family
+
+    def missing_at_3(psis, family="stable", **kwargs):
+        fam = real(psis, family, **kwargs)
+        at3 = jnp.abs(jnp.asarray(psis) - PSI3) < 1e-9
+        code = jnp.where(at3, vhcjax.RESULTS.not_converged._value, fam.result._value)
+        return eqx.tree_at(lambda f: f.result._value, fam, code)
+
+    monkeypatch.setattr(vhcjax.stability, "period1_family", missing_at_3)
+    csv = tmp_path / "b.csv"
+    argv = ["bifurcation", "--slope-deg", "2.75:3.0:0.05", "--transient", "40", "--record", "8"]
+    assert main(argv + ["--json", "--csv", str(csv)]) == 0
+    captured = capsys.readouterr()
+    out = json.loads(captured.out)
+    assert out["num_no_gait"] == 1 and out["num_fell"] == 0 and out["num_slopes"] == 6
+    assert "no period-1 gait found at 1 of 6 slopes (3 deg)" in captured.err
+    rows = csv.read_text().splitlines()
+    assert rows[6] == "3,not_converged," + "," * 8
+    assert rows[5].split(",")[1:3] == ["successful", "1"]
+
+
+@pytest.mark.slow
 def test_period_four_gait_at_five_degrees():
     """Thesis 7.4: a four-step gait at 5 degrees. Newton on P^4 from a rounded seed: its
     minimal period is 4, the simulator returns to it after 4 steps, and its P^4

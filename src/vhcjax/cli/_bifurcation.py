@@ -58,7 +58,8 @@ def register(subparsers):
         "--csv",
         metavar="FILE",
         help="write slope_deg, result, pattern, period_1..period_RECORD (pattern: "
-        "steps per repetition, 0 aperiodic, -1 fell: no periods after the fall)",
+        "steps per repetition, 0 aperiodic, -1 fell: no periods after the fall; empty "
+        "where no period-1 gait was found: result is the search's)",
     )
     p.add_argument("--png", metavar="FILE", help="save the bifurcation diagram")
     p.add_argument(
@@ -236,15 +237,31 @@ def run_bifurcation(args):
         if branch2 is not None and branch2["flip_psi"] is not None:
             flips.append(branch2["flip_psi"])
     bar.update(1)
+    # simulated from the period-1 gait, where there is one
+    sim = np.flatnonzero(ok1)
+    sim_slopes = [slopes[i] for i in sim]
     diag = S.bifurcation_diagram(
-        psis, np.asarray(fam.z), model=model, num_transient=args.transient, num_record=args.record
+        psis[sim],
+        np.asarray(fam.z)[sim],
+        model=model,
+        num_transient=args.transient,
+        num_record=args.record,
     )
     bar.update(1)
     bar.close()
+    family_names = result_names(fam.result)
+    if len(sim) < len(slopes):
+        missed = [f"{s:g}" for s, ok in zip(slopes, ok1) if not ok]
+        span = missed[0] if len(missed) == 1 else f"{missed[0]} to {missed[-1]}"
+        warn(
+            args,
+            f"no period-1 gait found at {len(missed)} of {len(slopes)} slopes ({span} deg): "
+            "not simulated (their --csv rows give the search's result)",
+        )
     names = result_names(diag.result)
     aperiodic = np.asarray(diag.period_pattern) == 0
     if aperiodic.any():
-        warn(args, _aperiodic_message(slopes, aperiodic, args.transient, args.record))
+        warn(args, _aperiodic_message(sim_slopes, aperiodic, args.transient, args.record))
     if args.csv:
         from .._io import atomic_open
 
@@ -254,10 +271,16 @@ def run_bifurcation(args):
                 + ",".join(f"period_{i + 1}" for i in range(args.record))
                 + "\n"
             )
-            for s, r, nd, per in zip(slopes, names, diag.period_pattern, diag.periods):
+            row = {int(i): j for j, i in enumerate(sim)}
+            for i, s in enumerate(slopes):
+                if i not in row:  # no gait to start from: the search's code, no pattern
+                    f.write(f"{s:.10g},{family_names[i]}," + "," * args.record + "\n")
+                    continue
+                j = row[i]
+                nd = diag.period_pattern[j]
                 # the steps after a fall have no period (zero): empty cells
-                cells = ("" if nd < 0 and x == 0 else f"{x:.12g}" for x in per)
-                f.write(f"{s:.10g},{r},{nd}," + ",".join(cells) + "\n")
+                cells = ("" if nd < 0 and x == 0 else f"{x:.12g}" for x in diag.periods[j])
+                f.write(f"{s:.10g},{names[j]},{nd}," + ",".join(cells) + "\n")
     if args.png:
         from ..plotting import plot_bifurcation
 
@@ -288,8 +311,9 @@ def run_bifurcation(args):
         "period_doubling_slopes_deg_simulation": [
             math.degrees(f) for f in S.period_doubling_slopes_from_diagram(diag)
         ],
-        "first_fall_slope_deg": slopes[int(np.argmax(fell))] if fell.any() else None,
+        "first_fall_slope_deg": sim_slopes[int(np.argmax(fell))] if fell.any() else None,
         "num_slopes": len(slopes),
+        "num_no_gait": len(slopes) - len(sim),
         "num_fell": int(fell.sum()),
         "num_aperiodic": int(aperiodic.sum()),
         "transient_steps": args.transient,
@@ -297,7 +321,7 @@ def run_bifurcation(args):
         "tolerance": "rtol=atol=1e-8 (FAST_CONFIG)",
     }
     if not fell.any():
-        out["first_fall_slope_deg_reason"] = "no walker fell at any slope"
+        out["first_fall_slope_deg_reason"] = "no walker fell at any slope simulated"
     if args.json:
         print_json(out)
     else:
