@@ -32,6 +32,7 @@ X3 = np.asarray(M3.section_to_state(Z3))
         (lambda: vj.recover(M3, X3[None], X3, num_steps=0), "num_steps"),
         (lambda: vj.recover(M3, X3[None], X3, max_period=0), "max_period"),
         (lambda: vj.recover(M3, X3, X3), r"shape \(batch, 4\)"),
+        (lambda: vj.recover(M3, X3[None], X3 * math.nan), "x_star must be finite"),
         (lambda: vj.max_push(M3, X3, 0.73, [], [0.0]), "at least one phase"),
         (lambda: vj.max_push(M3, X3, 0.73, [math.nan], [0.0]), "finite"),
         (lambda: vj.max_push(M3, X3, 0.73, [0.1], [0.0], p_max=0.0), "p_max"),

@@ -11,7 +11,9 @@ costs a few steps, not `num_steps`.
 
 import equinox as eqx
 import jax
+import jax.core
 import jax.numpy as jnp
+import numpy as np
 
 from .._programs import stored_jit
 from .._results import RESULTS
@@ -87,6 +89,8 @@ def recover(
             f"recover: x0 must have shape (batch, {x_star.shape[-1]}) (states of the gait's "
             f"size), got {x0.shape}"
         )
+    if not isinstance(x_star, jax.core.Tracer) and not np.isfinite(np.asarray(x_star)).all():
+        raise ValueError("recover: the gait state x_star must be finite")
     if int(num_steps) < 1 or int(max_period) < 1:
         raise ValueError(
             f"recover: num_steps and max_period must be at least 1, got {num_steps}, {max_period}"
