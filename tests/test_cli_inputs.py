@@ -368,6 +368,7 @@ def test_robustness_commands_analyse_the_gait_that_gait_finds(capsys):
 
 _M = vj.CompassGait()
 _Z = jnp.array([0.2186688, -1.09238359, -0.37737395])
+_X = np.asarray(_M.section_to_state(_Z))
 
 
 @pytest.mark.parametrize(
@@ -393,11 +394,40 @@ _Z = jnp.array([0.2186688, -1.09238359, -0.37737395])
         (lambda: vj.atlas([2.0], [1.0], step=0.0), "step"),
         (lambda: vj.atlas([2.0], [1.0], gravity=-9.81), "gravity"),
         (lambda: vj.atlas([2.0], [1.0], psi_start=0.1, psi_max=0.05), "psi_max"),
+        (lambda: vj.fixed_point(_M, _Z, k=0), "positive integer"),
+        (lambda: vj.fixed_point(_M, _Z, k=-1), "positive integer"),
+        (lambda: vj.fixed_point(_M, _Z, k=1.5), "positive integer"),
+        (lambda: vj.step_map(_M, _Z, k=0), "positive integer"),
+        (lambda: vj.continue_fixed_point(_M, _Z, vj.CompassGait(psi=float("nan"))), "finite"),
+        (lambda: vj.continue_fixed_point(_M, _Z, vj.CompassGait(mH=float("nan"))), "finite"),
+        (lambda: vj.continue_fixed_point(_M, _Z[:2], vj.CompassGait(psi=0.06)), "z_start"),
+        (lambda: vj.continue_fixed_point(_M, _Z, _M, k=0), "positive integer"),
+        (lambda: vj.bifurcation_diagram([0.05], _Z[None], num_record=0), "num_record"),
+        (lambda: vj.bifurcation_diagram([0.05], _Z[None], num_record=1), "num_record"),
+        (lambda: vj.bifurcation_diagram([0.05], _Z[None], num_transient=-1), "num_transient"),
+        (lambda: vj.bifurcation_diagram([0.05, 0.06], _Z[None]), "one gait per slope"),
+        (lambda: vj.basin_slice(_M, _Z, shape=(2, 2), num_steps=0), "num_steps"),
+        (lambda: vj.recover(_M, _X[None], _X, num_steps=0), "num_steps"),
+        (lambda: vj.recover(_M, _X[None], _X, max_period=0), "max_period"),
+        (lambda: vj.recover(_M, _X, _X), "shape (batch, 4)"),
+        (lambda: vj.recover(_M, _X[None], _X * float("nan")), "x_star must be finite"),
+        (lambda: vj.max_push(_M, _X, 0.73, [], [0.0]), "at least one phase"),
+        (lambda: vj.max_push(_M, _X, 0.73, [float("nan")], [0.0]), "finite"),
+        (lambda: vj.max_push(_M, _X, 0.73, [0.1], [0.0], p_max=0.0), "search interval"),
+        (lambda: vj.max_push(_M, _X, 0.73, [0.1], [0.0], iterations=0), "iterations"),
+        (lambda: vj.max_floor_step(_M, _X, h_max=0.0), "search interval"),
+        (lambda: vj.max_floor_step(_M, _X, h_max=-0.01), "search interval"),
+        (lambda: vj.max_floor_step(_M, _X, iterations=0), "iterations"),
+        (lambda: vj.flip_slope(_M, _Z, step=0.0), "step must be positive"),
+        (lambda: vj.flip_slope(_M, _Z, step=float("nan")), "step must be positive"),
+        (lambda: vj.contraction(_M, _Z, scale=0.0), "scale"),
+        (lambda: vj.contraction(_M, _Z, scale=float("nan")), "scale"),
+        (lambda: vj.sweep(_M, [[0.05, 0.06]]), "one-dimensional"),
     ],
 )
 def test_library_arguments_refused_in_one_line(call, message):
     """Wrong shapes and arguments: a one-line ValueError naming what is expected, before
-    any tracing (no deep JAX error)."""
+    any tracing (no deep JAX error, no NaN or plausible number computed from them)."""
     with pytest.raises(ValueError, match=re.escape(message)) as err:
         call()
     assert "\n" not in str(err.value)

@@ -129,8 +129,8 @@ def run_multipliers(args):
 
         # continued from the default model's gait to this model (any parameters)
         gait = find_gait(model, args.family, args.method, throw=False)
-        if not getattr(args, "method_given", True) and vhc_inapplicable(gait):
-            why = vhc_inapplicable(gait)  # the VHC search's assumption fails
+        why = None if getattr(args, "method_given", True) else vhc_inapplicable(gait)
+        if why:  # the VHC search's assumption fails
             warn(args, why)
             method = "shooting"
             gait = find_gait(model, args.family, method, throw=False)
@@ -251,12 +251,11 @@ def run_bifurcation(args):
     bar.close()
     family_names = result_names(fam.result)
     if len(sim) < len(slopes):
-        missed = [f"{s:g}" for s, ok in zip(slopes, ok1) if not ok]
-        span = missed[0] if len(missed) == 1 else f"{missed[0]} to {missed[-1]}"
+        missed = [s for s, ok in zip(slopes, ok1) if not ok]
         warn(
             args,
-            f"no period-1 gait found at {len(missed)} of {len(slopes)} slopes ({span} deg): "
-            "not simulated (their --csv rows give the search's result)",
+            f"no period-1 gait found at {len(missed)} of {len(slopes)} slopes "
+            f"({_span(missed)} deg): not simulated (their --csv rows give the search's result)",
         )
     names = result_names(diag.result)
     aperiodic = np.asarray(diag.period_pattern) == 0
@@ -337,14 +336,19 @@ def _aperiodic_message(slopes, aperiodic, transient, record):
 
     from ..stability._multipliers import PERIOD_CANDIDATES
 
-    where = [f"{s:g}" for s in np.asarray(slopes)[np.asarray(aperiodic)]]
-    span = where[0] if len(where) == 1 else f"{where[0]} to {where[-1]}"
+    where = np.asarray(slopes)[np.asarray(aperiodic)]
     tried = [str(p) for p in PERIOD_CANDIDATES if p < record]
     tried = "1 step" if len(tried) == 1 else ", ".join(tried[:-1]) + f" or {tried[-1]} steps"
     return (
-        f"at {len(where)} of {len(slopes)} slopes ({span} deg) the {record} recorded step "
+        f"at {len(where)} of {len(slopes)} slopes ({_span(where)} deg) the {record} recorded step "
         f"periods repeat with no period of {tried}: a chaotic walk, another period, "
         "or a walk not settled "
         f"after {transient} transient steps (a longer --transient tells them apart; the "
         "simulated period-doubling slopes count settled patterns only)"
     )
+
+
+def _span(slopes):
+    """`"a"` or `"a to b"`: the first and last of some slopes (deg), for a message."""
+    first, last = f"{slopes[0]:g}", f"{slopes[-1]:g}"
+    return first if len(slopes) == 1 else f"{first} to {last}"

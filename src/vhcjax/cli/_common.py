@@ -138,11 +138,12 @@ def check_figure_file(path, flag):
         return
     from matplotlib.backend_bases import FigureCanvasBase
 
-    known = ", ".join(sorted(FigureCanvasBase.get_supported_filetypes()))
+    formats = FigureCanvasBase.get_supported_filetypes()
+    known = ", ".join(sorted(formats))
     fmt = os.path.splitext(path)[1].lstrip(".").lower()
     if not fmt:
         raise CLIError(f"{flag} {path!r}: name the format by a suffix ({known})")
-    if fmt not in FigureCanvasBase.get_supported_filetypes():
+    if fmt not in formats:
         raise CLIError(f"{flag} {path!r}: a figure is written as {known}, not {fmt!r}")
     check_output_file(path, flag)
 

@@ -179,11 +179,10 @@ def run_gait(args):
         _check_solved_slope(args.slope_deg, "without --guess")
     guess = None if args.guess is None else jnp.asarray(args.guess)
     gait = find_gait(model, args.family, args.method, guess, throw=False)
-    switched = None
-    if not getattr(args, "method_given", True) and vhc_inapplicable(gait):
+    switched = None if getattr(args, "method_given", True) else vhc_inapplicable(gait)
+    if switched:
         # the VHC search's assumption fails (its phi'' ODE is singular along the arc):
         # the gait, if there is one, comes from shooting, which does not need it
-        switched = vhc_inapplicable(gait)
         gait = find_gait(model, args.family, "shooting", guess, throw=False)
     rec = gait_json(gait, args.slope_deg)
     if switched:

@@ -37,6 +37,7 @@ from ._simulate import (
     Simulation as Simulation,
     SolverConfig as SolverConfig,
     StepResult as StepResult,
+    check_map_steps as check_map_steps,
     check_num_steps as check_num_steps,
     check_section_shape as check_section_shape,
     check_state_shape as check_state_shape,

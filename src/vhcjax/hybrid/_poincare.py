@@ -8,8 +8,6 @@ variational equations and the event-time tangent); its Jacobian gives the Floque
 multipliers of a gait, independently of the transverse linearization (thesis ch. 6).
 """
 
-import operator
-
 import equinox as eqx
 import jax
 import jax.core
@@ -19,7 +17,7 @@ import optimistix as optx
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..solvers import detach, implicit_outputs
-from ._simulate import DEFAULT_CONFIG, step_unchecked
+from ._simulate import DEFAULT_CONFIG, check_map_steps, check_section_shape, step_unchecked
 
 
 class MapResult(eqx.Module):
@@ -30,20 +28,9 @@ class MapResult(eqx.Module):
     result: RESULTS
 
 
-def _check_k(k):
-    """`k`, the number of steps of the map: a positive integer (a compile-time constant)."""
-    try:
-        n = operator.index(k)  # an int, a numpy integer, a 0-d integer array
-    except TypeError:
-        n = 0
-    if isinstance(k, bool) or n < 1:
-        raise ValueError(f"k (steps of the map) must be a positive integer, got {k!r}")
-    return n
-
-
 def step_map(model, z, k=1, config=DEFAULT_CONFIG):
     """$P^k(z)$: `k` steps of the hybrid simulation from section coordinates `z`."""
-    k = _check_k(k)
+    k = check_map_steps(k)
     x = model.section_to_state(z)
     if k == 1:
         sr = step_unchecked(model, x, config)
@@ -165,7 +152,7 @@ def fixed_point(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, config=
     never through the Newton iterations; a failed search has zero derivatives.
     """
     z0 = jax.lax.stop_gradient(jnp.asarray(z0, dtype=float))
-    k = _check_k(k)
+    k = check_map_steps(k)
     fp = _search(detach(model), z0, k, rtol, atol, max_steps, config)
     return _with_derivatives(model, fp, k, config)
 
@@ -178,7 +165,7 @@ def fixed_point_jit(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, con
     derivatives run the same compiled search (on the parameters' values) and compile
     only the implicit-derivative program."""
     z0 = jax.lax.stop_gradient(jnp.asarray(z0, dtype=float))
-    k = _check_k(k)
+    k = check_map_steps(k)
     fp = _search_jit(detach(model), z0, k, rtol, atol, max_steps, config)
     return _with_derivatives(model, fp, k, config)
 
@@ -244,19 +231,8 @@ def continue_fixed_point(start, z_start, model, k=1, *, config=DEFAULT_CONFIG):
         raise ValueError("continue_fixed_point: start and model must be the same kind of model")
     if any(eqx.is_inexact_array(x) and not np.all(np.isfinite(x)) for x in a + b):
         raise ValueError("continue_fixed_point: every parameter must be finite")
-    k = _check_k(k)
-    z_start = np.asarray(z_start, float)
-    try:
-        section = jax.eval_shape(
-            lambda z: start.state_to_section(start.section_to_state(z)), z_start
-        )
-    except (TypeError, ValueError, IndexError):
-        section = None
-    if z_start.ndim != 1 or section is None or section.shape != z_start.shape:
-        raise ValueError(
-            f"continue_fixed_point: z_start must be a point of the model's section, got shape "
-            f"{z_start.shape}"
-        )
+    k = check_map_steps(k)
+    check_section_shape(start, np.asarray(z_start, float), "z_start")
     spread = 0.0
     for x, y in zip(a, b):
         if eqx.is_inexact_array(x):

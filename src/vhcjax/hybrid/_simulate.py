@@ -8,6 +8,7 @@ non-finite states are result codes per member, never silent NaNs, and never a Py
 on a traced value.
 """
 
+import operator
 from typing import NamedTuple
 
 import diffrax
@@ -336,6 +337,18 @@ def check_num_steps(num_steps):
     """A one-line `ValueError` unless `num_steps` is a nonnegative integer."""
     if isinstance(num_steps, bool) or not isinstance(num_steps, (int, np.integer)) or num_steps < 0:
         raise ValueError(f"num_steps must be a nonnegative integer, got {num_steps!r}")
+
+
+def check_map_steps(k):
+    """`k`, the steps of a map $P^k$, as an `int`; a one-line `ValueError` unless it is a
+    positive integer (an int, a numpy integer or a 0-d integer array)."""
+    try:
+        n = operator.index(k)
+    except TypeError:
+        n = 0
+    if isinstance(k, bool) or n < 1:
+        raise ValueError(f"k (steps of the map) must be a positive integer, got {k!r}")
+    return n
 
 
 def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):

@@ -22,8 +22,6 @@ independent ways that the tests compare:
    \\Phi(t_s)^{-1} L(t_s) B(t_s) P$.
 """
 
-import math
-
 import diffrax
 import equinox as eqx
 import jax
@@ -323,11 +321,6 @@ def max_push(
         raise ValueError("max_push: give at least one phase and one angle")
     if not (np.isfinite(phases).all() and np.isfinite(angles).all()):
         raise ValueError("max_push: phases and angles must be finite")
-    if not (math.isfinite(p_max) and p_max > 0) or int(iterations) < 1:
-        raise ValueError(
-            f"max_push: p_max must be positive and finite and iterations at least 1, got "
-            f"{p_max}, {iterations}"
-        )
     late = pulse_past_strike(phases, period, duration)
     if late:
         raise ValueError(f"max_push: {late}")

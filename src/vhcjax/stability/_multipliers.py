@@ -33,6 +33,7 @@ from .._results import RESULTS
 from ..hybrid import (
     DEFAULT_CONFIG,
     FAST_CONFIG,
+    check_map_steps,
     check_section_shape,
     flow,
     ode_solver,
@@ -590,9 +591,7 @@ def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG, *, iterations=20, h=1e-6
     `bad_input`, with zero periods and multipliers (nothing computed); a `k` that is not
     a positive integer, or a `z0` of another shape, is a `ValueError`.
     """
-    if isinstance(k, bool) or not isinstance(k, (int, np.integer)) or k < 1:
-        raise ValueError(f"k must be a positive integer (steps per period), got {k!r}")
-    k = int(k)
+    k = check_map_steps(k)
     check_section_shape(model, jnp.asarray(z0), "z0")
     if not bool(model.validate()):  # an invalid model takes no step: nothing computed
         z = np.asarray(z0, float)
