@@ -9,6 +9,7 @@ stop before JAX is used (they take milliseconds).
 
 import argparse
 import json
+import math
 import os
 import re
 import signal
@@ -19,6 +20,7 @@ import time
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 import vhcjax as vj
 from vhcjax._json import to_jsonable
@@ -72,16 +74,14 @@ CASES = [
 
 
 def test_every_numeric_flag_is_checked():
-    """A numeric flag is either a model flag (checked by `model_from_args`) or parsed by a
-    range-checking `number` type; plain `float`/`int` would let NaN through."""
+    """Every numeric flag is parsed by a `number` type (the strict number syntax of
+    `read_number`, finite, range-checked; model flags' ranges are checked by
+    `model_from_args`); plain `float`/`int` would let NaN and `1_0` through."""
     seen = set()
     for cmd, a in _numeric_actions():
         flag = a.option_strings[0]
         seen.add(cmd)
-        if flag in MODEL_FLAGS:
-            assert a.type is float, (cmd, flag)
-        else:
-            assert hasattr(a.type, "bounds"), f"{cmd} {flag} has an unchecked type {a.type}"
+        assert hasattr(a.type, "bounds"), f"{cmd} {flag} has an unchecked type {a.type}"
     assert seen == set(_subparsers()) - {"reproduce"}
     assert len(CASES) > 150
 
@@ -431,3 +431,175 @@ def test_library_arguments_refused_in_one_line(call, message):
     with pytest.raises(ValueError, match=re.escape(message)) as err:
         call()
     assert "\n" not in str(err.value)
+
+
+NOT_NUMBERS = [
+    ["gait", "--slope-deg", "0_3"],  # Python's literal syntax: 3 degrees
+    ["simulate", "--steps", "1_0"],  # 10 steps
+    ["gait", "--slope-deg", "\uff13"],  # a full-width 3
+    ["simulate", "--steps", "\u0661\u0660"],  # Arabic-Indic 10
+    ["gait", "--slope-deg", "\u00a03"],  # a no-break space before it
+    ["gait", "--slope-deg", "0x3"],
+    ["gait", "--slope-deg", "1.2.3"],
+    ["gait", "--slope-deg", "3,5"],
+    ["contraction", "--steps", "1e1"],  # an integer flag: digits only
+    ["contraction", "--steps", "10.0"],
+    ["basin", "--grid", "2_0", "20"],
+    ["simulate", "--x0", "0.2", "-0.3", "-1_0", "0"],
+    ["push", "--directions-deg", "9_0"],
+    ["sweep", "--slope-deg", "1:2:0_5"],
+    ["bifurcation", "--slope-deg", "\uff12:3:0.5"],
+    ["stabilize", "--q", "1,1_0,1"],
+    ["stabilize", "--r", "1e0_0"],
+    ["atlas", "--mass-ratio", "1,\uff12", "--length-ratio", "1"],
+    ["atlas", "--mass-ratio", "1", "--length-ratio", "0_5:1:0.5"],
+    ["design", "--objective", "speed", "--vary", "a", "--bounds", "a=0_1:0.9"],
+]
+
+
+@pytest.mark.parametrize("argv", NOT_NUMBERS, ids=[" ".join(a) for a in NOT_NUMBERS])
+def test_numbers_a_person_would_not_type_are_refused(capsys, argv):
+    """Python reads `0_3` as 3, `1_0` as 10 and any Unicode digit as a digit; the command
+    line reads what a person types (ASCII digits, one point, an exponent) and refuses the
+    rest, in every place a number is read: flag types, nargs values, START:STOP:STEP,
+    comma lists, --bounds."""
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and err.startswith(f"vhcjax {argv[0]}: error:"), err
+    assert "Traceback" not in err
+
+
+@pytest.mark.parametrize("text", ["3", "3.", "3.0", "+3", " 3", "3\t", "3e0", "3E0", ".3e1"])
+def test_numbers_as_typed_are_read(text):
+    assert build_parser().parse_args(["gait", "--slope-deg", text]).slope_deg == 3.0
+
+
+LONG = "x" * 10_000
+LONG_VALUES = [
+    ["gait", "--slope-deg", LONG],
+    ["gait", "--slope-deg", "1" * 10_000],
+    ["simulate", "--steps", "9" * 10_000],
+    ["simulate", "--x0", "0.2", LONG, "0", "0"],
+    ["sweep", "--slope-deg", "1:2:" + LONG],
+    ["stabilize", "--q", "1,1," + LONG],
+    ["atlas", "--mass-ratio", LONG, "--length-ratio", "1"],
+    ["gait", "--family", LONG],
+    ["gait", "--family", "x " * 5_000],
+    ["basin", "--axes", "q1," + LONG],
+    ["design", "--objective", "speed", "--vary", LONG],
+    ["gait", "--no-such-flag", LONG],
+    ["simulate", "--animate", LONG + ".mp4"],
+]
+
+
+@pytest.mark.parametrize("argv", LONG_VALUES, ids=[" ".join(a)[:40] for a in LONG_VALUES])
+def test_a_long_bad_value_is_echoed_as_a_short_prefix(capsys, argv):
+    """A 10,000-character bad value: the one-line error shows its first characters and
+    its length, not the whole value."""
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert "\n" not in err and len(err) < 400, err[:500]
+    assert "characters)" in err, err
+
+
+# What a person reads: characters a number is made of, and look-alikes Python also reads
+ALPHABET = "0123456789.eE+-_ \t,x" + "\uff13\u0663\u00a0" + "infaINF"
+SETTINGS = {"deadline": None, "derandomize": True, "max_examples": 400}
+
+
+def _as_a_person_reads(text):
+    """The number in `text` as a person reads it, `"large"` if beyond every float, or
+    `None`: a reader written apart from `read_number` (character by character, exact
+    arithmetic): an optional sign, ASCII digits with at most one point (a digit on at
+    least one side), an optional exponent of ASCII digits; spaces or tabs around."""
+    from fractions import Fraction
+
+    s = text.strip(" \t")
+    sign = -1 if s[:1] == "-" else 1
+    s = s[1:] if s[:1] in ("-", "+") else s
+    mantissa, exponent = s, "0"
+    for mark in "eE":
+        if mark in s:
+            mantissa, _, exponent = s.partition(mark)
+            break
+    whole, point, fraction = mantissa.partition(".")
+    if exponent[:1] in ("-", "+"):
+        exp_sign, exponent = (-1 if exponent[0] == "-" else 1), exponent[1:]
+    else:
+        exp_sign = 1
+    ascii_digits = set("0123456789")
+    if not (set(whole + fraction + exponent) <= ascii_digits) or not (whole + fraction):
+        return None
+    if not exponent or "." in fraction:
+        return None
+    digits = (whole + fraction).lstrip("0")
+    if not digits:
+        return 0.0
+    power = exp_sign * int(exponent) - len(fraction)
+    if power + len(digits) > 400:
+        return "large"
+    if power + len(digits) < -400:
+        return 0.0
+    value = Fraction(int(digits)) * Fraction(10) ** power
+    try:
+        return sign * float(value)
+    except OverflowError:
+        return "large"
+
+
+@given(st.text(ALPHABET, max_size=14))
+@settings(**SETTINGS)
+def test_what_a_flag_accepts_is_what_a_person_reads(text):
+    """Property: a numeric flag accepts a string only if a person reads a number in it,
+    and then means that number; `1_0`, full-width digits, no-break spaces, `inf`/`nan`
+    and beyond-float values are refused."""
+    from vhcjax.cli._common import read_number
+
+    expected = _as_a_person_reads(text)
+    try:
+        got = read_number(text)
+    except ValueError as e:
+        got = None
+        assert "\n" not in str(e)
+    if expected is None or expected == "large":
+        assert got is None, (text, got)
+    else:
+        assert got == expected, (text, got, expected)
+
+
+@given(st.text(ALPHABET, max_size=10))
+@settings(**SETTINGS)
+def test_what_an_integer_flag_accepts_is_what_a_person_reads(text):
+    from vhcjax.cli._common import read_number
+
+    s = text.strip(" \t")
+    body = s[1:] if s[:1] in ("-", "+") else s
+    person = int(s) if body and set(body) <= set("0123456789") else None
+    try:
+        got = read_number(text, int)
+    except ValueError:
+        got = None
+    assert got == person, (text, got)
+
+
+@given(
+    st.floats(allow_nan=False, allow_infinity=False),
+    st.sampled_from(["{!r}", "{:.3e}", "{:.17g}", "{:+.6f}", "{:E}"]),
+)
+@settings(**SETTINGS)
+def test_numbers_written_as_people_write_them_are_read_exactly(x, fmt):
+    """Property: every number printed as people print them (Python's repr, fixed and
+    scientific notation) is accepted, with the value printed (refused as too large where
+    the printing rounded it past the largest float); also in a comma list and as
+    START:STOP:STEP."""
+    from vhcjax.cli._common import read_number, read_numbers
+
+    text = fmt.format(x)
+    if not math.isfinite(float(text)):  # rounded past the largest float by the format
+        with pytest.raises(ValueError, match="too large"):
+            read_number(text)
+        return
+    assert read_number(text) == float(text)
+    assert read_numbers(f"{text},{text}", "--q") == [float(text)] * 2
+    if abs(float(text)) < 1e300:
+        assert parse_range(f"{text}:{text}:1", "--x") == [float(text)]

@@ -33,34 +33,113 @@ class Parser(argparse.ArgumentParser):
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
-        number = r"(?:(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?|inf|infinity|nan)"
-        # a negative number, or a comma-separated list starting with one (--q -1,1,1)
+        # A value, not an option: "-" then anything but a letter or "-" (a negative
+        # number, as typed or mistyped: -1e6, -1_0, a list -1,1,1), or -inf, -nan; it is
+        # then read, or refused, by the flag's own number syntax (`read_number`).
         self._negative_number_matcher = re.compile(
-            rf"^-{number}(?:,[-+]?{number})*$", re.IGNORECASE
+            r"^-(?:[^-a-z]|(?:inf|infinity|nan)(?:,|$))", re.IGNORECASE
         )
 
     def error(self, message):
-        # "argument --x0: must be ..." -> "--x0 must be ...", as the model-flag checks say
-        m = re.fullmatch(r"argument ([^:]+): (must .*)", message)
+        # "argument --x0: must be ..." -> "--x0 must be ...", as the model-flag checks say;
+        # "argument --x0: expected ..." -> "--x0: expected ..."
+        m = re.fullmatch(r"argument ([^:]+): (.*)", message)
         if m:
-            message = f"{m[1]} {m[2]}"
-        raise ArgumentError(f"{self.prog}: error: {message}")
+            message = f"{m[1]}{'' if m[2].startswith(('must ', 'is ')) else ':'} {m[2]}"
+        # argparse quotes the values it echoes ("invalid choice: 'xxx...'"): cut long ones
+        message = re.sub(
+            rf"'([^']{{{SHOWN_CHARS + 1},}})'", lambda v: shown(v[1]), " ".join(message.split())
+        )
+        raise ArgumentError(one_line(f"{self.prog}: error: {message}"))
+
+
+#: Longest value echoed whole in a message; a longer one is cut (`shown`).
+SHOWN_CHARS = 40
+#: Longest file name echoed whole (`shown_path`): names are long more often than values.
+PATH_CHARS = 200
+#: Longest message line; beyond, it is cut (`one_line`).
+MAX_LINE = 3 * PATH_CHARS
+
+
+def shown(text, limit=SHOWN_CHARS):
+    """`text` (a value as the user typed it) for a one-line message: quoted, and cut to
+    its first characters, with its length, when longer than `limit`."""
+    text = str(text)
+    if len(text) <= limit:
+        return repr(text)
+    return f"{text[: limit - 10]!r}... ({len(text):,} characters)"
+
+
+def shown_path(path):
+    """`shown` for a file name."""
+    return shown(path, PATH_CHARS)
+
+
+def one_line(message):
+    """`message` on one line: whitespace runs (newlines included) become one space, a
+    word longer than `PATH_CHARS` is cut as `shown` cuts a value, and a message still
+    longer than `MAX_LINE` characters is cut there."""
+    message = " ".join(str(message).split())
+    message = re.sub(rf"\S{{{PATH_CHARS + 1},}}", lambda m: shown(m[0]), message)
+    if len(message) > MAX_LINE:
+        message = f"{message[: MAX_LINE - 30]}... ({len(message):,} characters)"
+    return message
+
+
+#: What a person types as a number: ASCII digits, at most one decimal point, an optional
+#: exponent. Python's `float` and `int` read more (`1_0` as 10, full-width and other
+#: Unicode digits, surrounding Unicode spaces, `0x10` in `int(x, 0)`): none of it here.
+_DECIMAL = re.compile(r"[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?")
+_INTEGER = re.compile(r"[-+]?[0-9]+")
+_NOT_FINITE = re.compile(r"[-+]?(?:inf|infinity|nan)", re.IGNORECASE)
+#: Most digits of an integer value (beyond, it is out of every range anyway).
+_MAX_DIGITS = 100
+
+
+def read_number(text, kind=float):
+    """The number of `kind` (float or int) that a person reads in `text`: ASCII digits
+    with at most one decimal point and an exponent (`3`, `-0.5`, `.5`, `2.`, `1e-3`),
+    for an integer digits alone, spaces or tabs around them allowed. Everything else is
+    refused with a `ValueError` of one line (the value cut by `shown`): `inf` and `nan`
+    as not finite, a value beyond the largest float as too large, and `0_3`, full-width
+    digits, `0x10`, `1,5` or two points as not a number."""
+    s = text.strip(" \t")
+    if _NOT_FINITE.fullmatch(s):
+        raise ValueError(f"must be a finite number, got {shown(text)}")
+    if kind is int:
+        if not _INTEGER.fullmatch(s):
+            raise ValueError(f"expected an integer (digits only), got {shown(text)}")
+        if len(s) > _MAX_DIGITS:
+            raise ValueError(f"is out of range, got {shown(text)}")
+        return int(s)
+    if not _DECIMAL.fullmatch(s):
+        raise ValueError(f"expected a number (digits, a point, an exponent), got {shown(text)}")
+    v = float(s)
+    if not math.isfinite(v):  # beyond the largest float
+        raise ValueError(f"is too large, got {shown(text)}")
+    return v
+
+
+def read_numbers(text, name, kind=float):
+    """A comma-separated list of numbers (`1,2,3`), each read by `read_number`; a
+    `CLIError` naming `name` for a bad one."""
+    try:
+        return [read_number(t, kind) for t in text.split(",")]
+    except ValueError as e:
+        raise CLIError(f"{name}: {e}") from None
 
 
 def number(kind=float, *, lo=None, hi=None, lo_open=False, hi_open=False):
-    """An argparse `type` for a finite number of `kind` (float or int) in the range
-    `lo`..`hi` (inclusive unless `lo_open` / `hi_open`): NaN, inf and values out of the
-    range are refused before any work, with a one-line message."""
+    """An argparse `type` for a finite number of `kind` (float or int), read by
+    `read_number`, in the range `lo`..`hi` (inclusive unless `lo_open` / `hi_open`):
+    NaN, inf, what a person would not read as a number and values out of the range are
+    refused before any work, with a one-line message."""
 
     def parse(text):
         try:
-            v = float(text) if kind is float else int(text)
-        except ValueError:
-            raise argparse.ArgumentTypeError(
-                f"expected {'a number' if kind is float else 'an integer'}, got {text!r}"
-            ) from None
-        if not math.isfinite(v):
-            raise argparse.ArgumentTypeError(f"must be a finite number, got {text!r}")
+            v = read_number(text, kind)
+        except ValueError as e:
+            raise argparse.ArgumentTypeError(str(e)) from None
         low_bad = lo is not None and (v <= lo if lo_open else v < lo)
         high_bad = hi is not None and (v >= hi if hi_open else v > hi)
         if low_bad or high_bad:
@@ -68,7 +147,7 @@ def number(kind=float, *, lo=None, hi=None, lo_open=False, hi_open=False):
             right = "inf" if hi is None else f"{hi:g}"
             raise argparse.ArgumentTypeError(
                 f"must be in {'(' if lo_open or lo is None else '['}{left}, {right}"
-                f"{')' if hi_open or hi is None else ']'}, got {text}"
+                f"{')' if hi_open or hi is None else ']'}, got {shown(text)}"
             )
         return v
 
@@ -164,24 +243,27 @@ def check_output_dir(path, flag):
 
 
 def add_model_flags(parser, *, slope=True, slope_default=3.0):
-    """Model flags shared by every command (SI units; slope in degrees)."""
+    """Model flags shared by every command (SI units; slope in degrees): finite numbers
+    (`read_number`), their ranges checked by `model_from_args`."""
     g = parser.add_argument_group("model (compass gait, thesis Table 1 defaults)")
     if slope:
         g.add_argument(
             "--slope-deg",
-            type=float,
+            type=FINITE,
             default=slope_default,
             help="slope angle in degrees, in (0, 30) (default %(default)s)",
         )
-    g.add_argument("--mass-hip", type=float, default=10.0, help="hip mass mH in kg (default 10)")
-    g.add_argument("--mass-leg", type=float, default=5.0, help="mass of each leg in kg (default 5)")
+    g.add_argument("--mass-hip", type=FINITE, default=10.0, help="hip mass mH in kg (default 10)")
     g.add_argument(
-        "--a", type=float, default=0.5, help="hip to leg centre of mass in m (default 0.5)"
+        "--mass-leg", type=FINITE, default=5.0, help="mass of each leg in kg (default 5)"
     )
     g.add_argument(
-        "--b", type=float, default=0.5, help="leg centre of mass to foot in m (default 0.5)"
+        "--a", type=FINITE, default=0.5, help="hip to leg centre of mass in m (default 0.5)"
     )
-    g.add_argument("--gravity", type=float, default=9.81, help="gravity in m/s^2 (default 9.81)")
+    g.add_argument(
+        "--b", type=FINITE, default=0.5, help="leg centre of mass to foot in m (default 0.5)"
+    )
+    g.add_argument("--gravity", type=FINITE, default=9.81, help="gravity in m/s^2 (default 9.81)")
     return g
 
 
@@ -390,24 +472,23 @@ def describe(args, slope_deg=None):
 
 def parse_range(text, name="--slope-deg"):
     """`START:STOP:STEP` (STOP included when on the grid, never passed), or one number,
-    -> list of floats."""
+    -> list of floats; each number read by `read_number`."""
+    pieces = text.split(":")
+    if len(pieces) not in (1, 3):
+        raise CLIError(f"{name} must be START:STOP:STEP or one number, got {shown(text)}")
     try:
-        parts = [float(p) for p in text.split(":")]
-    except ValueError:
-        raise CLIError(f"{name} must be START:STOP:STEP or one number, got {text!r}") from None
+        parts = [read_number(p) for p in pieces]
+    except ValueError as e:
+        raise CLIError(f"{name} must be START:STOP:STEP or one number: {e}") from None
     if len(parts) == 1:
-        check_finite(name, parts[0])
         return parts
-    if len(parts) != 3:
-        raise CLIError(f"{name} must be START:STOP:STEP or one number, got {text!r}")
     start, stop, step = parts
-    check_finite(name, start, stop, step)
     if step <= 0 or stop < start:
-        raise CLIError(f"{name} needs STEP > 0 and STOP >= START, got {text!r}")
+        raise CLIError(f"{name} needs STEP > 0 and STOP >= START, got {shown(text)}")
     # STOP is included when it lies within 1e-9 of a step of the grid; nothing past it.
     span = (stop - start) / step
     if span >= 100_000:
-        raise CLIError(f"{name} {text!r} gives {span + 1:.4g} values; at most 100000")
+        raise CLIError(f"{name} {shown(text)} gives {span + 1:.4g} values; at most 100000")
     n = math.floor(span + 1e-9) + 1
     # rounded to 1e-9 of a step: 0.9, not 0.8999999999999999 (0.3 + 2 x 0.3), and two
     # points of the grid never round to one; START as given
@@ -434,7 +515,7 @@ def print_json(obj):
 
 def warn(args, message):
     """A one-line warning on stderr."""
-    print(f"vhcjax {args.command}: warning: {message}", file=sys.stderr)
+    print(f"vhcjax {args.command}: warning: {one_line(message)}", file=sys.stderr)
 
 
 #: Set by `--quiet` (every command has it): no progress bars, no notes on stderr.

@@ -5,6 +5,7 @@ import csv
 import math
 
 from ._common import (
+    FINITE,
     POSITIVE,
     CLIError,
     add_model_flags,
@@ -17,6 +18,9 @@ from ._common import (
     parse_range,
     print_json,
     progress,
+    read_number,
+    read_numbers,
+    shown,
     warn,
 )
 
@@ -102,7 +106,7 @@ def register(subparsers):
     )
     a.add_argument(
         "--slope-deg",
-        type=float,  # checked by run_atlas like the model flags
+        type=FINITE,  # range checked by run_atlas like the model flags
         default=None,
         help="report the spectral radius at this slope (degrees, in (0, 30))",
     )
@@ -147,9 +151,11 @@ def parse_vary(text):
         raise CLIError("--vary needs at least one parameter")
     for n in names:
         if n not in PARAMETERS:
-            raise CLIError(f"--vary: unknown parameter {n!r} (choose from {', '.join(PARAMETERS)})")
+            raise CLIError(
+                f"--vary: unknown parameter {shown(n)} (choose from {', '.join(PARAMETERS)})"
+            )
     if len(set(names)) != len(names):
-        raise CLIError(f"--vary lists a parameter twice: {text!r}")
+        raise CLIError(f"--vary lists a parameter twice: {shown(text)}")
     return names
 
 
@@ -166,12 +172,12 @@ def parse_bounds(text, vary):
     for item in text.split(","):
         try:
             name, rng = item.split("=")
-            lo, hi = (float(x) for x in rng.split(":"))
+            lo, hi = (read_number(x) for x in rng.split(":"))
         except ValueError:
-            raise CLIError(f"--bounds must be NAME=LO:HI,..., got {item!r}") from None
+            raise CLIError(f"--bounds must be NAME=LO:HI,..., got {shown(item)}") from None
         name = name.strip()
         if name not in vary:
-            raise CLIError(f"--bounds: {name!r} is not in --vary")
+            raise CLIError(f"--bounds: {shown(name)} is not in --vary")
         if name in out:
             raise CLIError(f"--bounds: {name} is given twice")
         check_finite("--bounds", lo, hi)
@@ -189,16 +195,11 @@ def parse_bounds(text, vary):
 
 def parse_values(text, name):
     """`START:STOP:STEP` (STOP included when on the grid, never passed) or a
-    comma-separated list of positive numbers."""
-    try:
-        if ":" in text:
-            values = parse_range(text, name)  # never past STOP
-        else:
-            values = [float(x) for x in text.split(",")]
-    except ValueError:
-        raise CLIError(
-            f"{name} must be START:STOP:STEP or a list like 1,2,3, got {text!r}"
-        ) from None
+    comma-separated list of positive numbers (`read_number`)."""
+    if ":" in text:
+        values = parse_range(text, name)  # never past STOP
+    else:
+        values = read_numbers(text, name)
     for v in values:
         _positive(name, v)
     if len(values) > 200:

@@ -17,6 +17,7 @@ from ._common import (
     number,
     print_json,
     progress,
+    shown,
     walker_from_args,
     warn,
 )
@@ -342,9 +343,11 @@ def run_basin(args):
     try:
         axes = tuple(AXIS_NAMES.index(a.strip()) for a in args.axes.split(","))
     except ValueError:
-        raise CLIError(f"--axes must be two of {','.join(AXIS_NAMES)}, got {args.axes!r}") from None
+        raise CLIError(
+            f"--axes must be two of {','.join(AXIS_NAMES)}, got {shown(args.axes)}"
+        ) from None
     if len(axes) != 2 or axes[0] == axes[1]:
-        raise CLIError(f"--axes needs two different coordinates, got {args.axes!r}")
+        raise CLIError(f"--axes needs two different coordinates, got {shown(args.axes)}")
     points = args.grid[0] * args.grid[1]
     if points > MAX_GRID_POINTS:
         raise CLIError(

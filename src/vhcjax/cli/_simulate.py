@@ -14,6 +14,7 @@ from ._common import (
     count,
     describe,
     print_json,
+    shown_path,
     walker_from_args,
 )
 
@@ -134,7 +135,7 @@ def run(args):
     elif bool(model.fallen(jnp.asarray(args.x0[:3], float))):
         raise CLIError(f"--x0 is a fallen kneed walker (angles {args.x0[:3]} rad)")
     if args.animate is not None and not args.animate.lower().endswith(".gif"):
-        raise CLIError(f"--animate needs a .gif file name, got {args.animate!r}")
+        raise CLIError(f"--animate needs a .gif file name, got {shown_path(args.animate)}")
     check_output_file(args.animate, "--animate")
     check_output_dir(args.plots, "--plots")  # created now, before the work
 

@@ -15,6 +15,8 @@ from ._common import (
     kneed_gait,
     number,
     print_json,
+    read_numbers,
+    shown,
     walker_from_args,
     warn,
 )
@@ -109,10 +111,7 @@ _WEIGHT_RANGE = (1e-8, 1e8)
 
 
 def _numbers(flag, text, n, names):
-    try:
-        values = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise CLIError(f"{flag} must be comma-separated numbers, got {text!r}") from None
+    values = read_numbers(text, flag)
     if len(values) != n:
         what = "weight" if n == 1 else "weights"
         raise CLIError(f"{flag} needs {n} {what} ({', '.join(names)}), got {len(values)}")
@@ -126,16 +125,16 @@ def _weights(args):
     q = _numbers("--q", text, len(coords), coords)
     lo, hi = _WEIGHT_RANGE
     if min(q) < 0 or max(q) == 0:
-        raise CLIError(f"--q must be >= 0 and not all zero, got {text!r}")
+        raise CLIError(f"--q must be >= 0 and not all zero, got {shown(text)}")
     if max(q) > hi or min(v for v in q if v > 0) < lo:
-        raise CLIError(f"--q: each nonzero weight must be in [{lo:g}, {hi:g}], got {text!r}")
+        raise CLIError(f"--q: each nonzero weight must be in [{lo:g}, {hi:g}], got {shown(text)}")
     text = args.r if args.r is not None else "1"
     n = 1 if "," not in text else len(torques)
     r = _numbers("--r", text, n, torques)
     if min(r) <= 0:
-        raise CLIError(f"--r must be positive, got {text!r}")
+        raise CLIError(f"--r must be positive, got {shown(text)}")
     if max(r) > hi or min(r) < lo:
-        raise CLIError(f"--r: each weight must be in [{lo:g}, {hi:g}], got {text!r}")
+        raise CLIError(f"--r: each weight must be in [{lo:g}, {hi:g}], got {shown(text)}")
     return q, r * (len(torques) // n)
 
 
