@@ -502,6 +502,33 @@ def test_a_long_bad_value_is_echoed_as_a_short_prefix(capsys, argv):
     assert "characters)" in err, err
 
 
+@pytest.mark.parametrize(
+    "argv, message",
+    [
+        (["atlas", "--mass-ratio", "2", "--length-ratio", "1", "--mass-hip", "40"], "--mass-ratio"),
+        (["atlas", "--mass-ratio", "2", "--length-ratio", "1", "--mass-hip", "10"], "--mass-ratio"),
+        (["basin", "--box", "0.1", "0.1", "0.1"], "give --volume-samples"),
+        (["basin", "--volume-samples", "0", "--box", "0.1", "0.1", "0.1"], "give --volume-samples"),
+        (["gait", "--slope-deg", "3", "--slope-deg", "4"], "--slope-deg is given twice"),
+        (["simulate", "--steps", "3", "--steps=4"], "--steps is given twice"),
+        (["sweep", "--slope-deg", "1:2:1", "--slope", "3"], "--slope-deg is given twice"),
+        (["basin", "--grid", "5", "5", "--grid", "6", "6"], "--grid is given twice"),
+        (["stabilize", "--q", "1,1,1", "--q", "2,2,2"], "--q is given twice"),
+    ],
+)
+def test_a_flag_the_command_would_not_use_is_refused(capsys, argv, message):
+    """Flags are never ignored: one the command does not use (atlas's hip mass comes
+    from --mass-ratio; --box only shapes --volume-samples) or the first of a flag given
+    twice is refused in one line, before any work."""
+    t0 = time.perf_counter()
+    assert main(argv) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err, err
+    assert time.perf_counter() - t0 < 15.0
+    atlas = _subparsers()["atlas"].format_help()
+    assert "--mass-hip" not in atlas and "--mass-leg" in atlas
+
+
 # What a person reads: characters a number is made of, and look-alikes Python also reads
 ALPHABET = "0123456789.eE+-_ \t,x" + "\uff13\u0663\u00a0" + "infaINF"
 SETTINGS = {"deadline": None, "derandomize": True, "max_examples": 400}

@@ -26,10 +26,11 @@ class ArgumentError(Exception):
 
 class Parser(argparse.ArgumentParser):
     """`argparse.ArgumentParser` whose errors are one line (raised as `ArgumentError`, so
-    that in-process callers of `main` get exit status 2 and no `SystemExit`), and which
+    that in-process callers of `main` get exit status 2 and no `SystemExit`), which
     reads a negative number in scientific notation (`-1e6`), `-inf`, `-nan` and a
     comma-separated list starting with a negative number (`-1,1,1`) as a value, not as
-    an option (argparse alone only knows `-12` and `-1.5`)."""
+    an option (argparse alone only knows `-12` and `-1.5`), and which refuses a flag
+    given twice (argparse would keep the last value and ignore the first)."""
 
     def __init__(self, *args, **kwargs):
         super().__init__(*args, **kwargs)
@@ -39,6 +40,31 @@ class Parser(argparse.ArgumentParser):
         self._negative_number_matcher = re.compile(
             r"^-(?:[^-a-z]|(?:inf|infinity|nan)(?:,|$))", re.IGNORECASE
         )
+
+    def parse_known_args(self, args=None, namespace=None):
+        args = list(sys.argv[1:] if args is None else args)
+        self._refuse_repeated(args)
+        return super().parse_known_args(args, namespace)
+
+    def _refuse_repeated(self, args):
+        """A flag that takes a value, given twice: argparse keeps the last value and
+        ignores the first; refused instead (one line)."""
+        seen = set()
+        for token in args:
+            if token == "--":
+                break
+            if not token.startswith("--"):
+                continue
+            name = token.split("=", 1)[0]
+            action = self._option_string_actions.get(name)
+            if action is None and self.allow_abbrev:  # `--slope` for `--slope-deg`
+                found = {a for o, a in self._option_string_actions.items() if o.startswith(name)}
+                action = found.pop() if len(found) == 1 else None
+            if action is None or action.nargs == 0:  # not ours, or a switch (--json)
+                continue
+            if action.dest in seen:
+                self.error(f"{action.option_strings[0]} is given twice: give it once")
+            seen.add(action.dest)
 
     def error(self, message):
         # "argument --x0: must be ..." -> "--x0 must be ...", as the model-flag checks say;

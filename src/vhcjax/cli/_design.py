@@ -1,6 +1,7 @@
 """`vhcjax design` and `vhcjax atlas`: walker design by gradient, and the flip-slope atlas
 over mass and length ratios."""
 
+import argparse
 import csv
 import math
 
@@ -92,6 +93,9 @@ def register(subparsers):
         "leg mass (--mass-leg), leg length (--a + --b) and gravity only set the scales.",
     )
     add_model_flags(a, slope=False)
+    for action in a._actions:  # the mass ratio sets the hip mass: refused (`run_atlas`)
+        if action.dest == "mass_hip":
+            action.default, action.help = None, argparse.SUPPRESS
     a.add_argument(
         "--mass-ratio",
         required=True,
@@ -346,7 +350,10 @@ def run_atlas(args):
 
     from ..parameters import atlas, atlas_json
 
-    model_from_args(args, slope_deg=3.0)  # validates the model flags
+    if args.mass_hip is not None:
+        raise CLIError("--mass-hip is set by --mass-ratio here (mH = ratio x --mass-leg): drop it")
+    args.mass_hip = 10.0  # a placeholder: each cell's hip mass is its ratio x --mass-leg
+    model_from_args(args, slope_deg=3.0)  # validates the other model flags
     check_output_file(args.csv, "--csv")
     check_figure_file(args.png, "--png")
     mu = parse_values(args.mass_ratio, "--mass-ratio")

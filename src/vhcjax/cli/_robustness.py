@@ -28,6 +28,8 @@ MAX_GRID_POINTS = 4_000_000
 MAX_SAMPLES = 10_000_000
 MAX_RECOVERY_CELLS = 50_000_000  # perturbations x (steps + 1) distances kept in memory
 AXIS_NAMES = ("q1", "dq1", "dq2")
+#: Default half widths of the box of `basin --volume-samples` (q1, dq1, dq2).
+BOX = (0.05, 0.2, 0.5)
 
 
 def _common(p, png_help):
@@ -193,8 +195,9 @@ def register(subparsers):
         "--box",
         type=HALF_WIDTH,
         nargs=3,
-        default=[0.05, 0.2, 0.5],
-        help="half widths of the 3-D box (q1, dq1, dq2)",
+        default=None,
+        help="half widths of the 3-D box (q1, dq1, dq2) of --volume-samples "
+        f"(default {' '.join(map(str, BOX))})",
     )
     p.set_defaults(func=run_basin)
 
@@ -356,6 +359,10 @@ def run_basin(args):
             f"memory); at most {MAX_GRID_POINTS:,}: use a coarser grid or several "
             "runs over smaller --half-widths"
         )
+    if args.box is not None and args.volume_samples == 0:
+        raise CLIError("--box is the box of --volume-samples: give --volume-samples too")
+    if args.box is None:
+        args.box = list(BOX)
     check_figure_file(args.png, "--png")
     model, z, _, period, zn = _gait(args)
     b = basin_slice(
