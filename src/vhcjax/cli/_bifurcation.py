@@ -13,6 +13,7 @@ from ._common import (
     check_slope_deg,
     count,
     describe,
+    figure_output,
     kneed_gait,
     model_from_args,
     parse_range,
@@ -163,7 +164,8 @@ def run_multipliers(args):
             else ([pc], ["Poincare (autodiff)"])
         )
         title = describe(args) if kneed else f"{args.family} family, {describe(args)}"
-        plot_multipliers_complex(sets, labels, args.png, title=title)
+        with figure_output(args.png) as fh:
+            plot_multipliers_complex(sets, labels, fh, title=title)
     family = None if kneed else args.family  # the kneed walker: its one family
     out = {"slope_deg": args.slope_deg, "family": family, "z": np.asarray(z), **stab}
     out["method"] = method
@@ -288,22 +290,24 @@ def run_bifurcation(args):
             branches.append(
                 ("period 2", np.degrees(branch2["psi"]), branch2["periods"], branch2["stable"])
             )
-        plot_bifurcation(
-            diag,
-            branches,
-            args.png,
-            flips_deg=[math.degrees(f) for f in flips],
-            case=describe(args, f"slopes {args.slope_deg} deg"),
-        )
+        with figure_output(args.png) as fh:
+            plot_bifurcation(
+                diag,
+                branches,
+                fh,
+                flips_deg=[math.degrees(f) for f in flips],
+                case=describe(args, f"slopes {args.slope_deg} deg"),
+            )
     if args.png_multipliers:
         from ..plotting import plot_multipliers_vs_slope
 
-        plot_multipliers_vs_slope(
-            np.degrees(psis)[ok1],
-            {"stable family": np.asarray(mult.poincare)[ok1]},
-            args.png_multipliers,
-            case="Poincare-map Jacobian, " + describe(args, f"slopes {args.slope_deg} deg"),
-        )
+        with figure_output(args.png_multipliers) as fh:
+            plot_multipliers_vs_slope(
+                np.degrees(psis)[ok1],
+                {"stable family": np.asarray(mult.poincare)[ok1]},
+                fh,
+                case="Poincare-map Jacobian, " + describe(args, f"slopes {args.slope_deg} deg"),
+            )
     fell = np.asarray(diag.fell)
     out = {
         "period_doubling_slopes_deg": [math.degrees(f) for f in flips],

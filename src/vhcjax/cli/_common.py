@@ -1,6 +1,7 @@
 """What the subcommands share: model flags, input checks, JSON output, progress bars."""
 
 import argparse
+import contextlib
 import json
 import math
 import os
@@ -8,6 +9,7 @@ import re
 import sys
 import tempfile
 
+from .._io import atomic_open, output_target
 from .._json import to_jsonable as to_jsonable
 
 
@@ -198,24 +200,43 @@ def count(lo=1, hi=100_000):
 
 
 def check_output_file(path, flag):
-    """Refuse, before any work, an output file that cannot be written: a missing or
-    unwritable folder, a directory, a read-only file. Nothing is left behind."""
+    """Refuse, before any work, an output that cannot be written: a missing or unwritable
+    folder, a directory, a read-only file, a descriptor not open for writing. A symbolic
+    link is checked where it points; a pipe or a device only for permission (opening a
+    pipe would wait for its reader). Nothing is left behind."""
     if path is None:
         return
-    folder = os.path.dirname(os.path.abspath(path)) or "."
+    how, where, fd = output_target(path)
+    if fd is not None:
+        import fcntl
+
+        try:
+            access = fcntl.fcntl(fd, fcntl.F_GETFL) & os.O_ACCMODE
+        except OSError:
+            raise CLIError(f"{flag} {shown_path(path)}: descriptor {fd} is not open") from None
+        if access == os.O_RDONLY:
+            raise CLIError(f"{flag} {shown_path(path)}: descriptor {fd} is open for reading only")
+        return
     if os.path.isdir(path):
-        raise CLIError(f"{flag} {path!r} is a directory")
+        raise CLIError(f"{flag} {shown_path(path)} is a directory")
+    if how == "direct":  # a pipe, a device, a socket
+        if not os.access(where, os.W_OK):
+            raise CLIError(f"{flag} {shown_path(path)} cannot be written: permission denied")
+        return
+    folder = os.path.dirname(where)
     if not os.path.isdir(folder):
         what = "is not a folder" if os.path.exists(folder) else "does not exist"
-        raise CLIError(f"{flag} {path!r}: folder {folder!r} {what}")
-    existed = os.path.exists(path)
+        raise CLIError(f"{flag} {shown_path(path)}: folder {shown_path(folder)} {what}")
+    existed = os.path.exists(where)
     try:
-        with open(path, "a"):
+        with open(where, "a"):
             pass
     except OSError as e:
-        raise CLIError(f"{flag} {path!r} cannot be written: {e.strerror}") from None
+        raise CLIError(f"{flag} {shown_path(path)} cannot be written: {e.strerror}") from None
     if not existed:
-        os.remove(path)
+        os.remove(where)
+    if not os.access(folder, os.W_OK | os.X_OK):  # the file is written beside, then renamed
+        raise CLIError(f"{flag} {shown_path(path)}: folder {shown_path(folder)} is not writable")
 
 
 #: The options that name an output file, as `args` attributes.
@@ -230,27 +251,99 @@ def check_distinct_outputs(args):
         if path is None:
             continue
         flag = "--" + name.replace("_", "-")
-        key = os.path.realpath(path)
+        how, where, fd = output_target(path)
+        key = (how, fd if fd is not None else os.path.realpath(where))
         if key in seen:
-            raise CLIError(f"{seen[key]} and {flag} name the same file {path!r}")
+            raise CLIError(f"{seen[key]} and {flag} name the same file {shown_path(path)}")
         seen[key] = flag
 
 
+#: Format of a figure written to a pipe, a device or a descriptor whose name has no
+#: suffix (`/dev/stdout`, bash's `>(...)`): the flags that name figures are `--png`.
+STREAM_FIGURE_FORMAT = "png"
+
+
+def figure_format(path):
+    """The format of the figure `path`: its suffix in lower case (`out.svg`: `"svg"`);
+    `STREAM_FIGURE_FORMAT` for a pipe, a device or a descriptor without one; `None` for
+    a file without one (matplotlib would write another file, `path` + ".png")."""
+    fmt = os.path.splitext(path)[1].lstrip(".").lower()
+    if fmt:
+        return fmt
+    return None if output_target(path).how == "replace" else STREAM_FIGURE_FORMAT
+
+
+#: Why matplotlib cannot write each format tried in this process (`None`: it can).
+_FORMAT_PROBLEMS: dict[str, str | None] = {}
+
+
+def _format_problem(fmt):
+    """Why matplotlib cannot write a figure as `fmt` here (PGF without LaTeX, a Pillow
+    without WebP), else `None`: a small figure with text is saved to memory, once per
+    format and process."""
+    if fmt not in _FORMAT_PROBLEMS:
+        import io
+
+        from matplotlib.figure import Figure
+
+        fig = Figure(figsize=(1, 1))
+        ax = fig.add_subplot()
+        ax.plot([0, 1], [0, 1])
+        ax.set_title("x")
+        try:
+            fig.savefig(io.BytesIO(), format=fmt)
+            _FORMAT_PROBLEMS[fmt] = None
+        except Exception as e:  # whatever the writer raises: the format is not usable
+            _FORMAT_PROBLEMS[fmt] = " ".join(str(e).split())[:200] or type(e).__name__
+    return _FORMAT_PROBLEMS[fmt]
+
+
 def check_figure_file(path, flag):
-    """`check_output_file` for a figure: also a suffix that matplotlib writes (without
-    one, matplotlib would write another file, `path` + ".png")."""
+    """`check_output_file` for a figure: also a format (`figure_format`) that matplotlib
+    writes, and writes here (tried on a small figure: PGF needs LaTeX)."""
     if path is None:
         return
     from matplotlib.backend_bases import FigureCanvasBase
 
     formats = FigureCanvasBase.get_supported_filetypes()
     known = ", ".join(sorted(formats))
-    fmt = os.path.splitext(path)[1].lstrip(".").lower()
+    fmt = figure_format(path)
     if not fmt:
-        raise CLIError(f"{flag} {path!r}: name the format by a suffix ({known})")
+        raise CLIError(f"{flag} {shown_path(path)}: name the format by a suffix ({known})")
     if fmt not in formats:
-        raise CLIError(f"{flag} {path!r}: a figure is written as {known}, not {fmt!r}")
+        raise CLIError(
+            f"{flag} {shown_path(path)}: a figure is written as {known}, not {shown(fmt)}"
+        )
+    problem = _format_problem(fmt)
+    if problem:
+        raise CLIError(f"{flag} {shown_path(path)}: matplotlib cannot write {fmt} here: {problem}")
     check_output_file(path, flag)
+
+
+def second_figure(path, name, flag):
+    """Where a command that writes several figures from one `flag` puts its figure
+    `name`: beside the first (`path`), as STEM-NAME.EXT in the same format (`out.svg`:
+    `out-slope.svg`). A pipe, a device or a descriptor takes one figure: refused."""
+    if output_target(path).how != "replace":
+        raise CLIError(
+            f"{flag} {shown_path(path)} is a pipe or a device, which takes one figure; this "
+            f"command also writes STEM-{name}.EXT beside it: name a file"
+        )
+    stem, ext = os.path.splitext(path)
+    return f"{stem}-{name}{ext}"
+
+
+@contextlib.contextmanager
+def figure_output(path):
+    """The file object that a plotting function, given it as its `path`, saves the
+    figure `path` to: written by `atomic_open`, in `figure_format(path)`."""
+    import matplotlib
+
+    with (
+        atomic_open(path, "wb") as fh,
+        matplotlib.rc_context({"savefig.format": figure_format(path)}),
+    ):
+        yield fh
 
 
 def check_output_dir(path, flag):
@@ -259,13 +352,13 @@ def check_output_dir(path, flag):
     if path is None:
         return
     if os.path.exists(path) and not os.path.isdir(path):
-        raise CLIError(f"{flag} {path!r} exists and is not a directory")
+        raise CLIError(f"{flag} {shown_path(path)} exists and is not a directory")
     try:
         os.makedirs(path, exist_ok=True)
         with tempfile.NamedTemporaryFile(dir=path, prefix=".vhcjax-write-test-"):
             pass
     except OSError as e:
-        raise CLIError(f"{flag} {path!r} cannot be written: {e.strerror}") from None
+        raise CLIError(f"{flag} {shown_path(path)} cannot be written: {e.strerror}") from None
 
 
 def add_model_flags(parser, *, slope=True, slope_default=3.0):

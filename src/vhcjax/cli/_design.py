@@ -14,6 +14,7 @@ from ._common import (
     check_finite,
     check_output_file,
     count,
+    figure_output,
     model_from_args,
     number,
     parse_range,
@@ -312,7 +313,8 @@ def run_design(args):
     if args.png:
         from ..plotting import plot_design
 
-        plot_design(res, args.png, args.slope_deg)
+        with figure_output(args.png) as fh:
+            plot_design(res, fh, args.slope_deg)
     if args.json:
         print_json(out)
     else:
@@ -412,9 +414,10 @@ def run_atlas(args):
     if args.png:
         from ..plotting import plot_atlas
 
-        plot_atlas(
-            at, args.png, mass_leg=args.mass_leg, leg_length=args.a + args.b, gravity=args.gravity
-        )
+        with figure_output(args.png) as fh:
+            plot_atlas(
+                at, fh, mass_leg=args.mass_leg, leg_length=args.a + args.b, gravity=args.gravity
+            )
     if args.json:
         print_json(rec)
     else:

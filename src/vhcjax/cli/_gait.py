@@ -14,6 +14,7 @@ from ._common import (
     check_output_file,
     check_slope_deg,
     describe,
+    figure_output,
     kneed_gait,
     model_from_args,
     parse_range,
@@ -409,9 +410,10 @@ def run_sweep(args):
     if args.png:
         from ..plotting import plot_sweep
 
-        plot_sweep(
-            results, args.png, case=describe(args, f"{args.method}, slopes {args.slope_deg} deg")
-        )
+        with figure_output(args.png) as fh:
+            plot_sweep(
+                results, fh, case=describe(args, f"{args.method}, slopes {args.slope_deg} deg")
+            )
     summary = {}
     for fam, sw in results.items():
         n_ok = sum(r["result"] == "successful" for r in rows[fam])

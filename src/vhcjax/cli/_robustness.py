@@ -13,10 +13,12 @@ from ._common import (
     check_figure_file,
     count,
     describe,
+    figure_output,
     kneed_gait,
     number,
     print_json,
     progress,
+    second_figure,
     shown,
     walker_from_args,
     warn,
@@ -208,7 +210,11 @@ def register(subparsers):
         "the slope (implicit differentiation), the largest single step up/down survived, "
         "recovery curves and the gait sensitivity norm for floor-height disturbances.",
     )
-    _common(p, "save the recovery after floor steps (and <FILE>-slope.png: derivatives)")
+    _common(
+        p,
+        "save the recovery after floor steps (and the derivatives beside it, in "
+        "STEM-slope.EXT: out.svg gives out-slope.svg)",
+    )
     p.add_argument(
         "--heights-mm",
         type=number(float, lo=-500.0, hi=500.0),
@@ -318,7 +324,8 @@ def run_contraction(args):
     if args.png:
         from ..plotting import plot_contraction
 
-        plot_contraction(c, args.png, case=f"gait at {describe(args)}")
+        with figure_output(args.png) as fh:
+            plot_contraction(c, fh, case=f"gait at {describe(args)}")
     if args.json:
         print_json(out)
     else:
@@ -426,7 +433,8 @@ def run_basin(args):
     if args.png:
         from ..plotting import plot_basin
 
-        plot_basin(b, args.png, case=f"gait at {describe(args)}")
+        with figure_output(args.png) as fh:
+            plot_basin(b, fh, case=f"gait at {describe(args)}")
     if args.json:
         print_json(out)
     else:
@@ -453,8 +461,10 @@ def run_slope(args):
     from ..robustness import UNDECIDED, gait_sensitivity_norm, max_floor_step, terrain_recovery
 
     check_figure_file(args.png, "--png")
-    if args.png:
-        check_figure_file(args.png.removesuffix(".png") + "-slope.png", "--png (-slope.png)")
+    slope_png = None  # the second figure (derivatives), beside the first
+    if args.png and not args.no_derivatives:
+        slope_png = second_figure(args.png, "slope", "--png")
+        check_figure_file(slope_png, "--png (its second figure)")
     model, z, x_star, period, zn = _gait(args)
     out = {"gait": zn, "period": period}
     if not args.no_derivatives:
@@ -505,13 +515,13 @@ def run_slope(args):
         from ..plotting import plot_slope, plot_terrain
 
         full = terrain_recovery(model, x_star, hs, args.steps, 0.0, stop_when_converged=False)
-        plot_terrain(
-            np.asarray(hs), full, period, args.png, float(g.norm), case=f"gait at {describe(args)}"
-        )
-        if not args.no_derivatives:
-            plot_slope(
-                s, args.png.removesuffix(".png") + "-slope.png", case=f"gait at {describe(args)}"
+        with figure_output(args.png) as fh:
+            plot_terrain(
+                np.asarray(hs), full, period, fh, float(g.norm), case=f"gait at {describe(args)}"
             )
+        if slope_png is not None:
+            with figure_output(slope_png) as fh:
+                plot_slope(s, fh, case=f"gait at {describe(args)}")
     if args.json:
         print_json(out)
     else:
@@ -630,16 +640,17 @@ def run_push(args):
     if args.png:
         from ..plotting import plot_push
 
-        plot_push(
-            phases,
-            D,
-            angles,
-            res.largest,
-            args.png,
-            unit,
-            p_max=args.max,
-            case=f"gait at {describe(args)}",
-        )
+        with figure_output(args.png) as fh:
+            plot_push(
+                phases,
+                D,
+                angles,
+                res.largest,
+                fh,
+                unit,
+                p_max=args.max,
+                case=f"gait at {describe(args)}",
+            )
     if args.json:
         print_json(out)
     else:

@@ -3,6 +3,7 @@
 import math
 import os
 
+from .._io import atomic_open, output_target
 from ._common import (
     KNEED_SEED,
     STATE,
@@ -13,6 +14,7 @@ from ._common import (
     check_output_file,
     count,
     describe,
+    figure_output,
     print_json,
     shown_path,
     walker_from_args,
@@ -134,8 +136,10 @@ def run(args):
         _check_start(model, args.x0)
     elif bool(model.fallen(jnp.asarray(args.x0[:3], float))):
         raise CLIError(f"--x0 is a fallen kneed walker (angles {args.x0[:3]} rad)")
-    if args.animate is not None and not args.animate.lower().endswith(".gif"):
-        raise CLIError(f"--animate needs a .gif file name, got {shown_path(args.animate)}")
+    if args.animate is not None:  # a GIF: a file named .gif, or a pipe or device
+        suffix = os.path.splitext(args.animate)[1].lower()
+        if suffix != ".gif" and (suffix or output_target(args.animate).how == "replace"):
+            raise CLIError(f"--animate needs a .gif file name, got {shown_path(args.animate)}")
     check_output_file(args.animate, "--animate")
     check_output_dir(args.plots, "--plots")  # created now, before the work
 
@@ -150,14 +154,19 @@ def run(args):
         if int(sim.num_successful) > 0:
             start = ", ".join(f"{v:.4g}" for v in args.x0)
             case = f"{describe(args)}, from x0 = ({start})"
-            plotting.plot_states(sim, path=os.path.join(args.plots, "states.png"), case=case)
-            plotting.plot_phase_portrait(sim, path=os.path.join(args.plots, "phase.png"), case=case)
-            plotting.plot_step_periods(sim, path=os.path.join(args.plots, "periods.png"), case=case)
+            for name, plot in (
+                ("states.png", plotting.plot_states),
+                ("phase.png", plotting.plot_phase_portrait),
+                ("periods.png", plotting.plot_step_periods),
+            ):
+                with figure_output(os.path.join(args.plots, name)) as fh:
+                    plot(sim, path=fh, case=case)
     if args.animate:
         from .. import plotting as plotting
 
         if int(sim.num_successful) > 0:
-            plotting.animate(sim, model, args.animate)
+            with atomic_open(args.animate, "wb") as fh:
+                plotting.animate(sim, model, fh)
 
     if args.json:
         print_json({"result": result, "num_successful": int(sim.num_successful), "steps": steps})

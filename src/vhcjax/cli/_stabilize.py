@@ -12,6 +12,7 @@ from ._common import (
     check_figure_file,
     check_finite,
     count,
+    figure_output,
     kneed_gait,
     number,
     print_json,
@@ -373,18 +374,19 @@ def run_stabilize(args):
         )
         title = f"{case} ({weights}, {lim}); perturbation {args.perturbation:g}"
         s_grid = np.asarray(st.system.domains[0].s if kneed else st.system.s)
-        plot_stabilization(
-            args.png,
-            title,
-            s_grid,
-            np.asarray(st.riccati.K),
-            err_c,
-            err_p,
-            basin_plot,
-            coordinates=_COORDINATES[args.model],
-            torques=_TORQUES[args.model],
-            reset_names=("knee strike",) if kneed else None,
-        )
+        with figure_output(args.png) as fh:
+            plot_stabilization(
+                fh,
+                title,
+                s_grid,
+                np.asarray(st.riccati.K),
+                err_c,
+                err_p,
+                basin_plot,
+                coordinates=_COORDINATES[args.model],
+                torques=_TORQUES[args.model],
+                reset_names=("knee strike",) if kneed else None,
+            )
     if args.json:
         print_json(_finite_or_none(out))
     else:

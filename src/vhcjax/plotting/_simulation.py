@@ -274,7 +274,7 @@ def animate(sim, model, path, *, fps=None, max_frames=300):
     **Arguments:**
 
     - `sim`: a dense `Simulation`; `model`: the model that produced it.
-    - `path`: output file (`.gif`, written with Pillow).
+    - `path`: output file (`.gif`) or binary file object; written as a GIF by Pillow.
     - `fps`: frames per second; default: real time (dense points per step / period).
     - `max_frames`: frames are subsampled evenly beyond this.
 
@@ -313,7 +313,12 @@ def animate(sim, model, path, *, fps=None, max_frames=300):
             )
         )
     plt.close(fig)
-    images[0].save(
-        path, save_all=True, append_images=images[1:], duration=int(round(1000.0 / fps)), loop=0
+    images[0].save(  # GIF whatever the name: `path` may be a file object or a pipe
+        path,
+        format="GIF",
+        save_all=True,
+        append_images=images[1:],
+        duration=int(round(1000.0 / fps)),
+        loop=0,
     )
     return len(idx)
