@@ -291,6 +291,72 @@ def test_ctrl_c_stops_reproduce_at_once(tmp_path):
     assert (os.listdir(out) if out.exists() else []) == []
 
 
+def _start_reproduce(out, prelude=""):
+    """`vhcjax reproduce --quick` in a process of its own (`prelude`: Python run first),
+    once its hidden work folder (where its figures go until the report is done) exists
+    in `out`."""
+    env = dict(os.environ)
+    src = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
+    env["PYTHONPATH"] = src + os.pathsep + env.get("PYTHONPATH", "")
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-c",
+            prelude + "import sys; from vhcjax.cli import main; sys.exit(main())",
+            "reproduce",
+            "--quick",
+            "--quiet",
+            "--out",
+            str(out),
+        ],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+    deadline = time.monotonic() + 120
+    while not (out.exists() and os.listdir(out)):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.1)
+    return proc
+
+
+@pytest.mark.parametrize(
+    "sig, line",
+    [(signal.SIGTERM, "terminated (SIGTERM)"), (signal.SIGHUP, "hung up (SIGHUP)")],
+    ids=["SIGTERM", "SIGHUP"],
+)
+def test_sigterm_and_sighup_stop_like_ctrl_c(tmp_path, sig, line):
+    """A batch scheduler's time limit (SIGTERM) or a closed terminal (SIGHUP) while
+    `vhcjax reproduce` works: one line, exit status 128 + the signal, within seconds,
+    and its work folder removed with whatever it held."""
+    out = tmp_path / "out"
+    proc = _start_reproduce(out)
+    assert [n.startswith(".reproduce-") for n in os.listdir(out)] == [True]
+    t0 = time.perf_counter()
+    proc.send_signal(sig)
+    _, stderr = proc.communicate(timeout=30)
+    assert time.perf_counter() - t0 < 5.0
+    assert proc.returncode == 128 + sig, stderr
+    assert stderr.strip().splitlines() == [f"vhcjax reproduce: {line}"], stderr
+    assert os.listdir(out) == []
+
+
+def test_an_ignored_hangup_stays_ignored(tmp_path):
+    """`nohup vhcjax ...`: started with SIGHUP ignored, the command keeps working through
+    a hangup (and still stops on SIGTERM)."""
+    out = tmp_path / "out"
+    ignored = "import signal; signal.signal(signal.SIGHUP, signal.SIG_IGN); "
+    proc = _start_reproduce(out, ignored)
+    proc.send_signal(signal.SIGHUP)
+    time.sleep(1.0)
+    assert proc.poll() is None
+    proc.send_signal(signal.SIGTERM)
+    _, stderr = proc.communicate(timeout=30)
+    assert proc.returncode == 128 + signal.SIGTERM, stderr
+    assert os.listdir(out) == []
+
+
 def test_a_model_flag_given_at_another_models_default_is_not_ignored():
     from vhcjax.cli._common import CLIError, walker_from_args
 

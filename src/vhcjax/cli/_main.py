@@ -62,39 +62,60 @@ def _first_run_note():
         )
 
 
-def _stop_on_interrupt():
-    """Ctrl-C (SIGINT) on the command line: one line, exit status 130, at once.
+#: Signals that stop a command, and the word its one line says: Ctrl-C, a batch
+#: scheduler's time limit or `kill`, a closed terminal. The exit status is 128 + the
+#: signal's number (130, 143, 129), as a shell reports a process killed by it.
+STOP_SIGNALS = {
+    signal.SIGINT: "interrupted",
+    signal.SIGTERM: "terminated (SIGTERM)",
+    signal.SIGHUP: "hung up (SIGHUP)",
+}
+
+
+def _stop_on_signals():
+    """Ctrl-C (SIGINT), SIGTERM and SIGHUP on the command line: one line, exit status 128
+    + the signal's number, at once, with no partial output left.
 
     A Python signal handler runs only when the main thread executes bytecode, and it may
     sit in a compiled XLA program for minutes; a `KeyboardInterrupt` does not stop worker
     threads either. But the C-level handler that `signal.signal` installs writes the
     signal number to the wakeup file descriptor at once, from whichever thread the
     signal hits; one daemon thread blocked on reading it removes the partial output files
-    (`vhcjax._io`) and ends the process.
+    and folders (`vhcjax._io`) and ends the process. A signal the process was started
+    with ignored (`nohup`, a background job of a script) stays ignored.
     """
     if threading.current_thread() is not threading.main_thread():
         return
+    watched = {int(s) for s in STOP_SIGNALS if signal.getsignal(s) is not signal.SIG_IGN}
+    if not watched:
+        return
     command = next((a for a in sys.argv[1:] if not a.startswith("-")), None)
-    line = (f"vhcjax {command}: interrupted\n" if command else "vhcjax: interrupted\n").encode()
+    prefix = f"vhcjax {command}" if command else "vhcjax"
+    lines = {int(s): f"{prefix}: {word}\n".encode() for s, word in STOP_SIGNALS.items()}
     lock = threading.Lock()
 
-    def stop(*_):
+    def stop(signum, *_):
         with lock:  # the handler and the thread may both get here
             remove_pending()
-            os.write(2, line)
-            os._exit(130)
+            try:
+                os.write(2, lines[signum])
+            except OSError:  # no terminal any more (SIGHUP): nothing to tell
+                pass
+            os._exit(128 + signum)
 
     r, w = os.pipe()
     os.set_blocking(w, False)
-    signal.signal(signal.SIGINT, stop)
+    for s in watched:
+        signal.signal(s, stop)
     signal.set_wakeup_fd(w, warn_on_full_buffer=False)
 
     def wait():  # no import here: the main thread may hold the import locks
-        while signal.SIGINT not in os.read(r, 64):
-            pass
-        stop()
+        while True:
+            for signum in os.read(r, 64):
+                if signum in watched:
+                    stop(signum)
 
-    threading.Thread(target=wait, name="vhcjax-sigint", daemon=True).start()
+    threading.Thread(target=wait, name="vhcjax-signals", daemon=True).start()
 
 
 def main(argv=None):
@@ -102,7 +123,7 @@ def main(argv=None):
     0, 1 (the computation failed, e.g. no gait found), 2 (bad input), 130 (interrupted)."""
     os.environ.setdefault("MPLBACKEND", "Agg")  # figures go to files
     if argv is None:
-        _stop_on_interrupt()
+        _stop_on_signals()
     try:
         args = build_parser().parse_args(argv)
     except ArgumentError as e:
