@@ -1,22 +1,29 @@
 """Outputs of the command line: written through symbolic links, to pipes, devices and
 descriptors as they are (no temporary file and rename there), checked before the work
-without ever blocking, in a format that can be written here.
+without ever blocking, in a format that can be written here; a write that fails (disk
+full, file too large, permission lost midway) is one line naming the file, exit 1.
 
 Most tests stop before any computation (the pre-checks) or call the writer alone; the
 end-to-end ones run `vhcjax simulate` for a step or two.
 """
 
+import errno
 import json
 import os
 import stat
+import subprocess
+import sys
 import threading
 import time
 
 import pytest
 
-from vhcjax._io import atomic_open, output_target
+from vhcjax import _io
+from vhcjax._io import WriteError, atomic_open, output_target
 from vhcjax.cli import _common, main
 from vhcjax.cli._common import CLIError, check_figure_file, check_output_file, second_figure
+
+SRC = os.path.join(os.path.dirname(os.path.dirname(os.path.abspath(__file__))), "src")
 
 
 def _read_pipe(r, into):
@@ -192,3 +199,93 @@ def test_simulate_writes_through_links_and_to_a_descriptor(tmp_path, capsys):
         assert (plots / name).is_symlink()
         assert (tmp_path / "kept" / name).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert sorted(os.listdir(plots)) == ["periods.png", "phase.png", "states.png"]
+
+
+def test_a_full_disk_is_one_line_naming_the_file(tmp_path, capsys):
+    """`/dev/full` behind the output's name: exit 1, one line naming the file as given,
+    no "internal error", nothing partial left."""
+    if not os.path.exists("/dev/full"):
+        pytest.skip("no /dev/full here")
+    gif = tmp_path / "walk.gif"
+    gif.symlink_to("/dev/full")
+    assert _simulate(tmp_path, "--animate", str(gif)) == 1
+    err = capsys.readouterr().err.strip()
+    assert err == f"vhcjax simulate: cannot write {str(gif)!r}: No space left on device"
+    assert os.listdir(tmp_path) == ["walk.gif"]
+
+
+def test_permission_lost_midway_is_one_line_naming_the_file(tmp_path, monkeypatch):
+    """Permission taken away between the pre-check and the rename (simulated: as root a
+    folder's mode does not stop a write): `WriteError` naming the output, no partial."""
+    real_replace = os.replace
+
+    def refused(src, dst):
+        raise PermissionError(errno.EACCES, "Permission denied", src, dst)
+
+    monkeypatch.setattr(_io.os, "replace", refused)
+    out = tmp_path / "table.csv"
+    with pytest.raises(WriteError) as err:
+        with atomic_open(str(out)) as fh:
+            fh.write("rows")
+    assert err.value.filename == str(out) and err.value.errno == errno.EACCES
+    monkeypatch.setattr(_io.os, "replace", real_replace)
+    assert os.listdir(tmp_path) == []
+    # an error of another file raised inside the block is not relabelled
+    with pytest.raises(FileNotFoundError) as other:
+        with atomic_open(str(out)):
+            open(tmp_path / "no" / "such")
+    assert not isinstance(other.value, WriteError)
+    assert os.listdir(tmp_path) == []
+
+
+SCRIPT = """
+import os, resource, sys
+from vhcjax.cli import _simulate, main
+
+real = _simulate.atomic_open
+
+def limited(*args, **kwargs):  # `ulimit -f 8` for the output alone (not the JAX cache)
+    resource.setrlimit(resource.RLIMIT_FSIZE, (8192, resource.RLIM_INFINITY))
+    return real(*args, **kwargs)
+
+_simulate.atomic_open = limited
+sys.exit(main(["simulate", "--steps", "2", "--quiet", "--animate", sys.argv[1]]))
+"""
+
+
+def test_a_file_too_large_is_one_line_naming_the_file(tmp_path):
+    """`ulimit -f` while the GIF is written: the kernel refuses the write (EFBIG; Python
+    ignores SIGXFSZ): exit 1, one line naming the file, no partial file left."""
+    env = dict(os.environ, PYTHONPATH=SRC + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    gif = str(tmp_path / "walk.gif")
+    proc = subprocess.run(
+        [sys.executable, "-c", SCRIPT, gif], env=env, capture_output=True, text=True, timeout=600
+    )
+    assert proc.returncode == 1, proc.stderr
+    assert proc.stderr.strip() == f"vhcjax simulate: cannot write {gif!r}: File too large"
+    assert os.listdir(tmp_path) == []
+
+
+class _Closed:
+    """A standard output that cannot be written."""
+
+    def __init__(self, code):
+        self.code = code
+
+    def write(self, text):
+        raise OSError(self.code, os.strerror(self.code))
+
+    def flush(self):
+        pass
+
+
+@pytest.mark.parametrize("code, status", [(errno.ENOSPC, 1), (errno.EPIPE, 141)])
+def test_standard_output_that_cannot_be_written(monkeypatch, capsys, code, status):
+    """`> /dev/full`: one line, exit 1; a closed pipe (`| head`): no line, exit 141."""
+    monkeypatch.setattr(sys, "stdout", _Closed(code))
+    assert main(["simulate", "--steps", "2", "--quiet", "--json"]) == status
+    err = capsys.readouterr().err.strip()
+    if status == 141:
+        assert err == ""
+    else:
+        assert err == "vhcjax simulate: cannot write standard output: No space left on device"

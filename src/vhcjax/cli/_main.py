@@ -4,13 +4,15 @@ Each subcommand lives in its own module of `vhcjax.cli` exposing `register(subpa
 bad input becomes a one-line message and exit status 2 instead of a traceback.
 """
 
+import errno
 import importlib
 import os
 import signal
 import sys
 import threading
+import warnings
 
-from .._io import remove_pending
+from .._io import WriteError, remove_pending
 from ._common import (
     QUIET,
     ArgumentError,
@@ -18,6 +20,8 @@ from ._common import (
     ComputationFailed,
     Parser,
     check_distinct_outputs,
+    one_line,
+    shown_path,
 )
 
 # Subcommand modules, in the order they appear in `vhcjax --help`.
@@ -120,7 +124,9 @@ def _stop_on_signals():
 
 def main(argv=None):
     """Run the command line `argv` (default `sys.argv[1:]`); returns the exit status:
-    0, 1 (the computation failed, e.g. no gait found), 2 (bad input), 130 (interrupted)."""
+    0, 1 (the computation failed, e.g. no gait found, or an output could not be
+    written), 2 (bad input), 130 (interrupted); as a process also 143 (SIGTERM), 129
+    (SIGHUP) and 141 (standard output closed by its reader, e.g. `| head`)."""
     os.environ.setdefault("MPLBACKEND", "Agg")  # figures go to files
     if argv is None:
         _stop_on_signals()
@@ -135,30 +141,110 @@ def main(argv=None):
     QUIET["on"] = bool(getattr(args, "quiet", False))
     if not QUIET["on"]:
         _first_run_note()
+    stdout = sys.stdout
+    sys.stdout = _Stdout(stdout)
+    try:
+        with warnings.catch_warnings():
+            warnings.showwarning = _one_line_warning(args.command)
+            return _run(args)
+    finally:
+        sys.stdout = stdout
+
+
+class _StdoutError(OSError):
+    """Standard output could not be written (its `errno` and `strerror`)."""
+
+
+class _Stdout:
+    """`sys.stdout` while a command runs: a failure to write there (a full disk, a closed
+    pipe) raises `_StdoutError`, told apart from the command's other errors."""
+
+    def __init__(self, stream):
+        self._stream = stream
+
+    def write(self, text):
+        try:
+            return self._stream.write(text)
+        except OSError as e:
+            raise _StdoutError(e.errno, e.strerror or str(e)) from e
+
+    def flush(self):
+        try:
+            self._stream.flush()
+        except OSError as e:
+            raise _StdoutError(e.errno, e.strerror or str(e)) from e
+
+    def __getattr__(self, name):
+        return getattr(self._stream, name)
+
+
+def _run(args):
+    prefix = f"vhcjax {args.command}:"
     try:
         check_distinct_outputs(args)
-        return int(args.func(args) or 0)
+        status = int(args.func(args) or 0)
+        sys.stdout.flush()  # a failure to write what was printed is this command's
+        return status
     except ComputationFailed as e:
-        print(f"vhcjax {args.command}: {e}", file=sys.stderr)
+        print(f"{prefix} {one_line(e)}", file=sys.stderr)
         return 1
     except CLIError as e:
-        print(f"vhcjax {args.command}: error: {e}", file=sys.stderr)
+        print(f"{prefix} error: {one_line(e)}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
         remove_pending()
-        print(f"vhcjax {args.command}: interrupted", file=sys.stderr)
+        print(f"{prefix} interrupted", file=sys.stderr)
         return 130
+    except _StdoutError as e:
+        remove_pending()
+        _drop_stdout(sys.stdout)
+        if e.errno == errno.EPIPE:
+            return 141  # its reader has gone (`| head`): nobody to tell
+        print(f"{prefix} cannot write standard output: {e.strerror}", file=sys.stderr)
+        return 1
+    except OSError as e:  # disk full, file too large, permission lost: not a bug
+        remove_pending()
+        reason = e.strerror or str(e)
+        if isinstance(e, WriteError):
+            message = f"cannot write {shown_path(e.filename)}: {reason}"
+        else:
+            message = reason if e.filename is None else f"{shown_path(e.filename)}: {reason}"
+        print(f"{prefix} {one_line(message)}", file=sys.stderr)
+        return 1
     except Exception as e:  # a bug, not bad input: one line, the traceback on request
         remove_pending()
         if os.environ.get("VHCJAX_DEBUG"):
             raise
         msg = " ".join(str(e).split())[:300]
         print(
-            f"vhcjax {args.command}: internal error: {type(e).__name__}: {msg} "
+            f"{prefix} internal error: {type(e).__name__}: {msg} "
             "(VHCJAX_DEBUG=1 shows the traceback)",
             file=sys.stderr,
         )
         return 1
+
+
+def _drop_stdout(stdout):
+    """Point the process's standard output at `os.devnull` when `stdout` (a `_Stdout`)
+    writes there: what is left in its buffer then goes nowhere at exit, instead of
+    failing a second time."""
+    stream = getattr(stdout, "_stream", None)
+    if stream is None or stream is not sys.__stdout__:  # an in-process caller's stream
+        return
+    try:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), stream.fileno())
+    except (OSError, ValueError):  # no descriptor: nothing to redirect
+        pass
+
+
+def _one_line_warning(command):
+    """A `warnings.showwarning` that prints a warning as the command's other warnings:
+    one line on stderr."""
+
+    def show(message, category, filename, lineno, file=None, line=None):
+        print(f"vhcjax {command}: warning: {one_line(message)}", file=sys.stderr)
+
+    return show
 
 
 if __name__ == "__main__":
