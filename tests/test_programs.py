@@ -3,8 +3,11 @@ tracing again, with the same numbers; anything that could go stale takes the pla
 
 import json
 import os
+import pickle
+import re
 import subprocess
 import sys
+import warnings
 
 import equinox as eqx
 import jax
@@ -213,3 +216,69 @@ def test_programs_compile_with_the_cpu_options():
     model, z = vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774])
     default = jax.jit(lambda z: vj.hybrid.step_map(model, z).z_next)(z)
     np.testing.assert_allclose(vj.hybrid.step_map_jit.plain(model, z).z_next, default, atol=1e-13)
+
+
+def _warned_once(monkeypatch):
+    monkeypatch.setattr(_programs, "_warned", set())
+
+
+def test_a_stored_program_that_is_not_the_calls_is_traced_again(store, monkeypatch):
+    """A cache whose files are valid but the wrong programs (one copied over another), or
+    a program whose record contradicts itself, or bytes that are no record at all: each
+    is recomputed with one warning naming the cache folder, gives the right numbers and
+    types, and is stored anew (the next process loads it without a warning)."""
+    counts = _counts(monkeypatch)
+    model, z = vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774])
+    right = vj.hybrid.step_map_jit(model, z)
+    other = _double_map(model, z, vj.hybrid.FAST_CONFIG)  # another program, beside it
+    (mine,) = [p for p in store.iterdir() if not p.name.startswith("double_map")]
+    (theirs,) = [p for p in store.iterdir() if p.name.startswith("double_map")]
+    good = mine.read_bytes()
+    record = pickle.loads(good)
+    wrong_program = dict(record, exported=pickle.loads(theirs.read_bytes())["exported"])
+    damages = {
+        "stored for another call": theirs.read_bytes(),
+        "not of step_map": pickle.dumps(wrong_program),
+        "unreadable": b"not a pickled program",
+    }
+    for why, damaged in damages.items():
+        mine.write_bytes(damaged)
+        monkeypatch.setattr(_programs, "_memo", {})
+        _warned_once(monkeypatch)
+        exported = counts["exported"]
+        with pytest.warns(RuntimeWarning, match=re.escape(str(store))) as caught:
+            again = vj.hybrid.step_map_jit(model, z)
+        assert len(caught) == 1 and why in str(caught[0].message), str(caught[0].message)
+        assert type(again) is type(right)
+        assert eqx.tree_equal(again, right, rtol=0, atol=0)
+        assert counts["exported"] == exported + 1
+        monkeypatch.setattr(_programs, "_memo", {})  # a later process: loads it, silently
+        loaded = counts["loaded"]
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            vj.hybrid.step_map_jit(model, z)
+        assert counts["loaded"] == loaded + 1
+    assert isinstance(other, tuple)
+
+
+def test_the_command_line_warns_in_one_line_and_recomputes(store, monkeypatch, capsys):
+    """`vhcjax simulate` on a cache whose programs were swapped: one warning line naming
+    the cache folder, exit 0, the numbers of an intact cache."""
+    from vhcjax.cli import main
+
+    argv = ["simulate", "--steps", "2", "--json", "--quiet"]
+    assert main(argv) == 0
+    first = json.loads(capsys.readouterr().out)
+    vj.hybrid.step_map_jit(vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774]))
+    files = sorted(store.iterdir())
+    contents = [p.read_bytes() for p in files]
+    for p, data in zip(files, contents[1:] + contents[:1]):  # each holds the next one's
+        p.write_bytes(data)
+    monkeypatch.setattr(_programs, "_memo", {})
+    _warned_once(monkeypatch)
+    assert main(argv) == 0
+    out, err = capsys.readouterr()
+    assert json.loads(out) == first
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("vhcjax simulate: warning: "), err
+    assert str(store) in lines[0] and "traced again" in lines[0]

@@ -30,6 +30,7 @@ import pickle
 import re
 import tempfile
 import threading
+import warnings
 
 import equinox as eqx
 import jax
@@ -152,10 +153,11 @@ def _named(x):
     return x
 
 
-def _key(fn, args, in_tree, static, leaves):
-    """The file name of a program, or `None` where a stored program could go stale: an
-    argument of a type from outside `_PINNED`, or static arguments without a stable text
-    (a function, printed with its address)."""
+def _call_text(fn, args, in_tree, static, leaves):
+    """What a program is stored for, as text: the sources, JAX, the platform, `fn`, the
+    arguments' structure, static values, shapes and dtypes; `None` where a stored program
+    could go stale: an argument of a type from outside `_PINNED`, or static arguments
+    without a stable text (a function, printed with its address)."""
     text = repr(jax.tree_util.tree_map(_named, static))
     if " at 0x" in text or not _pinned(args):
         return None
@@ -169,8 +171,20 @@ def _key(fn, args, in_tree, static, leaves):
         text,
         repr([(x.shape, str(x.dtype)) for x in leaves]),
     ]
-    digest = hashlib.sha256("\0".join(parts).encode()).hexdigest()[:40]
+    return "\0".join(parts)
+
+
+def _file_name(fn, call):
+    """The file name of the program stored for the call `call` (`_call_text`)."""
+    digest = hashlib.sha256(call.encode()).hexdigest()[:40]
     return f"{fn.__name__.strip('_')}-{digest}{_SUFFIX}"
+
+
+def _key(fn, args, in_tree, static, leaves):
+    """The file name of a program, or `None` where a stored program could go stale (see
+    `_call_text`)."""
+    call = _call_text(fn, args, in_tree, static, leaves)
+    return None if call is None else _file_name(fn, call)
 
 
 def _skeleton(tree):
@@ -224,8 +238,9 @@ def _export_with(flat, specs, targets):
     return jax.export.export(jax.jit(flat), disabled_checks=checks)(*specs)
 
 
-def _export(fn, in_tree, static, leaves):
-    """Trace `fn` once into an exported program, and the pickled record that restores it."""
+def _export(fn, in_tree, static, leaves, call):
+    """Trace `fn` once into an exported program, and the pickled record that restores it
+    (with `call`, the `_call_text` it is stored for, checked when it is loaded)."""
     shapes = {}
 
     def flat(*xs):  # named after `fn` below: the exported program keeps the name
@@ -246,6 +261,7 @@ def _export(fn, in_tree, static, leaves):
         exported = _export_with(flat, specs, targets + more)
     out_dyn, out_static = shapes["out"]
     record = {
+        "call": call,
         "exported": bytes(exported.serialize()),
         "skeleton": _skeleton(out_dyn),
         "static": out_static,
@@ -253,13 +269,55 @@ def _export(fn, in_tree, static, leaves):
     return _Program(exported, record["skeleton"], out_static), record
 
 
-def _load(path):
+class _Mismatch(Exception):
+    """A stored program that is not the one its call expects."""
+
+
+def _avals(xs):
+    return [(tuple(x.shape), np.dtype(x.dtype)) for x in xs]
+
+
+def _load(fn, path, call, leaves):
+    """The program of `fn` stored at `path` for the call `call` (`_call_text`) with array
+    arguments `leaves`, or `None` for a function remembered as not exportable. Raises
+    `_Mismatch` for a file stored for another call (its `call` differs, e.g. a file
+    copied over another) or one that contradicts itself: a program whose inputs are
+    not `leaves`' shapes and dtypes, whose outputs are not its output skeleton's, or
+    which is not `fn`'s."""
     with open(path, "rb") as fh:
         record = pickle.load(fh)
+    if not isinstance(record, dict) or record.get("call") != call:
+        raise _Mismatch("stored for another call")
     if record["exported"] is None:  # not exportable: the plain path
         return None
     exported = jax.export.deserialize(bytearray(record["exported"]))
+    skeleton = jax.tree_util.tree_leaves(record["skeleton"])
+    if exported.fun_name.removeprefix("jit_") != fn.__name__:
+        raise _Mismatch(f"the program of {exported.fun_name}, not of {fn.__name__}")
+    if _avals(exported.in_avals) != _avals(leaves):
+        raise _Mismatch("its inputs are not the call's")
+    out = _avals(exported.out_avals)
+    if [d for _, d in out] != [d for _, d in _avals(skeleton)]:
+        raise _Mismatch("its outputs are not its output structure's")
     return _Program(exported, record["skeleton"], record["static"])
+
+
+_warned: set[str] = set()  # program directories already warned about
+
+
+def _warn_mismatch(path, why):
+    """Warn once per process and folder: a stored program was not the one expected."""
+    folder = os.path.dirname(path)
+    if folder in _warned:
+        return
+    _warned.add(folder)
+    warnings.warn(
+        f"the cache folder {folder} holds a damaged or wrong program "
+        f"({os.path.basename(path)}: {why}): traced again and stored anew; deleting the "
+        "folder clears every stored program",
+        RuntimeWarning,
+        stacklevel=4,
+    )
 
 
 def _store(path, record):
@@ -324,16 +382,16 @@ def stored_jit(fn):
         directory = program_directory()
         if traced or directory is None or _spread(leaves):
             return run_plain(traced, args, kwargs)
-        key = _key(fn, (args, kwargs), in_tree, static, leaves)
-        if key is None:
+        call_text = _call_text(fn, (args, kwargs), in_tree, static, leaves)
+        if call_text is None:
             return run_plain(traced, args, kwargs)
-        path = os.path.join(directory, key)
+        path = os.path.join(directory, _file_name(fn, call_text))
         program = _memo.get(path, False)
         if program is False:
             with _lock:
                 program = _memo.get(path, False)
                 if program is False:
-                    program = _obtain(fn, path, in_tree, static, leaves)
+                    program = _obtain(fn, path, in_tree, static, leaves, call_text)
                     _memo[path] = program
         if program is None:
             return run_plain(traced, args, kwargs)
@@ -343,28 +401,33 @@ def stored_jit(fn):
     return call
 
 
-def _obtain(fn, path, in_tree, static, leaves):
-    """The program stored at `path`, else a new export stored there; `None` if `fn`
-    cannot be exported, or if the source files changed since vhcjax was imported (its
-    calls then take the plain path): the code this process runs is then not the code
-    that the key names, and a program traced from it must not be stored under that key,
-    nor one stored there be run in its place."""
+def _obtain(fn, path, in_tree, static, leaves, call):
+    """The program stored at `path` for `call` (`_call_text`), else a new export stored
+    there; `None` if `fn` cannot be exported, or if the source files changed since
+    vhcjax was imported (its calls then take the plain path): the code this process
+    runs is then not the code that the key names, and a program traced from it must not
+    be stored under that key, nor one stored there be run in its place. A stored file
+    that cannot be read or is not the program of `call` (`_load`) is replaced by a new
+    export, with a warning naming the cache folder."""
     if _hash_sources() != _source():
         return None
     if os.path.exists(path):
         try:
-            program = _load(path)
+            program = _load(fn, path, call, leaves)
             stats["loaded" if program is not None else "unexportable"] += 1
             return program
-        except Exception:  # unreadable or from an incompatible writer: export again
-            pass
+        except ImportError:  # no deserializer (flatbuffers) installed: nothing to load
+            return None
+        except Exception as err:  # damaged, or another call's program: export again
+            why = str(err) if isinstance(err, _Mismatch) else f"unreadable: {type(err).__name__}"
+            _warn_mismatch(path, why)
     try:
-        program, record = _export(fn, in_tree, static, leaves)
+        program, record = _export(fn, in_tree, static, leaves, call)
         stats["exported"] += 1
     except ImportError:  # no serializer (flatbuffers) installed: nothing to remember
         return None
     except Exception:  # e.g. a host callback, which jax.export cannot serialize
-        program, record = None, {"exported": None}  # remembered: no export next time
+        program, record = None, {"call": call, "exported": None}  # no export next time
         stats["unexportable"] += 1
     try:
         _store(path, record)
