@@ -177,10 +177,14 @@ def parse_bounds(text, vary):
     for item in text.split(","):
         try:
             name, rng = item.split("=")
-            lo, hi = (read_number(x) for x in rng.split(":"))
+            lo_text, hi_text = rng.split(":")
         except ValueError:
             raise CLIError(f"--bounds must be NAME=LO:HI,..., got {shown(item)}") from None
         name = name.strip()
+        try:
+            lo, hi = read_number(lo_text), read_number(hi_text)
+        except ValueError as e:
+            raise CLIError(f"--bounds {shown(name)}: {e}") from None
         if name not in vary:
             raise CLIError(f"--bounds: {shown(name)} is not in --vary")
         if name in out:
