@@ -8,12 +8,13 @@ from ._common import (
     STATE,
     CLIError,
     ComputationFailed,
+    add_method_flag,
     add_model_choice,
     add_model_flags,
     check_figure_file,
     count,
     describe,
-    kneed_gait,
+    find_walker_gait,
     number,
     print_json,
     progress,
@@ -37,62 +38,38 @@ def _common(p, png_help):
         nargs=3,
         metavar=("Q1", "DQ1", "DQ2"),
         default=None,
-        help="Newton seed for the gait: post-impact q1 (rad), dq1, dq2 (rad/s); "
-        "default: the stable gait, as `vhcjax gait` finds it (the kneed walker: its gait "
-        "continued from the default parameters)",
+        help="seed of the gait search: post-impact q1 (rad), dq1, dq2 (rad/s); "
+        "default: the stable gait, as `vhcjax gait` finds it (continued from the model's "
+        "reference gait)",
     )
+    add_method_flag(p)
     p.add_argument("--json", action="store_true", help="print the results as one JSON object")
     p.add_argument("--png", metavar="FILE", help=png_help)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def _gait(args):
-    """The gait the command analyses, or a one-line error: Newton shooting from `--gait`
-    when given; else the stable gait, found as `vhcjax gait` finds it (continued from
-    the default model's gait to this model and slope, by the VHC search, or by
-    shooting where that fails; the kneed walker: from its gait at the default
-    parameters), then made a fixed point of the step map by Newton shooting from
-    there. Newton from one fixed seed would land on whichever gait is nearest: at 0.5
-    degrees an unstable one, with a heavy hip none."""
-    import jax.numpy as jnp
+    """The gait the command analyses, or a one-line error: the stable gait, found as
+    `vhcjax gait` finds it (`vhcjax.find_gait` with `--method`: continued from the
+    model's reference gait to this model and slope, or searched from `--gait`), then
+    made a fixed point of the step map the simulations use by Newton shooting from
+    there (it moves the gait by the integration tolerance). Newton from one fixed seed
+    would land on whichever gait is nearest: at 0.5 degrees an unstable one, with a
+    heavy hip none."""
     import numpy as np
 
     from .._results import result_names
     from ..hybrid import fixed_point_jit
 
     model = walker_from_args(args)
-    if args.gait is not None:
-        fp = fixed_point_jit(model, jnp.asarray(args.gait, float))
-        if result_names(fp.result) != "successful":
-            raise ComputationFailed(
-                f"no gait found from --gait {args.gait} at slope {args.slope_deg} deg "
-                f"({result_names(fp.result)}); give a better seed"
-            )
-    elif getattr(args, "model", "") == "kneed":
-        fp, why = kneed_gait(model, flag="--gait")
-        if why is not None:
-            raise ComputationFailed(f"no kneed-walker gait found at {args.slope_deg} deg: {why}")
-    else:
-        from ..gait import find_gait
-
-        codes, fp = [], None
-        for method in ("vhc", "shooting"):  # shooting where the VHC search fails
-            gait = find_gait(model, "stable", method, throw=False)
-            code = result_names(gait.result)
-            if code == "successful":  # a fixed point of the step map, from the gait
-                fp = fixed_point_jit(model, model.state_to_section(gait.x_plus))
-                if result_names(fp.result) == "successful":
-                    break
-                code = f"found, but Newton shooting from it ended {result_names(fp.result)}"
-            codes.append(f"{method}: {code}")
-            fp = None
-        if fp is None:
-            raise ComputationFailed(
-                f"no stable gait found at slope {args.slope_deg} deg ({'; '.join(codes)}); "
-                "give --gait to analyse another one"
-            )
-        if codes:  # the VHC search failed: say so, and that shooting found the gait
-            warn(args, f"the VHC search failed ({codes[0]}): the gait was found by shooting")
+    gait, _ = find_walker_gait(args, model, "stable", args.gait, "--gait")
+    z = model.state_to_section(gait.x_plus)
+    fp = fixed_point_jit(model, z)
+    if result_names(fp.result) != "successful":
+        raise ComputationFailed(
+            f"the gait at slope {args.slope_deg:g} deg is no fixed point of the simulated "
+            f"step map (Newton shooting from it ended {result_names(fp.result)})"
+        )
     return model, fp.z, fp.x0, float(fp.periods[0]), np.asarray(fp.z)
 
 

@@ -4,7 +4,6 @@ import math
 import os
 
 from ._common import (
-    KNEED_SEED,
     STATE,
     CLIError,
     add_model_choice,
@@ -89,7 +88,8 @@ def _kneed_start(model):
     slope of `model` (the same section point)."""
     import jax.numpy as jnp
 
-    return [float(v) for v in model.section_to_state(jnp.asarray(KNEED_SEED))]
+    _, z = model.reference_gait()
+    return [float(v) for v in model.section_to_state(jnp.asarray(z))]
 
 
 def steps_as_dicts(sim):

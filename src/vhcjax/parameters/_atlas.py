@@ -18,7 +18,7 @@ import numpy as np
 from .._results import RESULTS
 from ..gait import find_gaits
 from ..models import CompassGait
-from ._flip import _det_and_radius_batch, _with_psi, flip_slopes
+from ._flip import _det_and_radius_batch, flip_slopes
 
 
 def grid_model(
@@ -170,7 +170,7 @@ def atlas(
             good = np.asarray(g.result == RESULTS.successful)
             alive &= good
             z = np.where(good[:, None], np.asarray(g.z), z)
-        _, r = _det_and_radius_batch(_with_psi(model, np.full(N, slope)), z)
+        _, r = _det_and_radius_batch(model.with_slope(np.full(N, slope)), z)
         rho = np.where(alive, np.asarray(r), np.nan)
     shape = MU.shape
     return Atlas(
