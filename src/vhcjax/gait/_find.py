@@ -18,6 +18,7 @@ from ._continuation import (
     _HOMOTOPY_STEPS,
     _continue,
     _gait_in_units_jit,
+    _homotopy_steps,
     _seed,
     _unknowns,
     continue_to_model,
@@ -485,6 +486,11 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord, far=None):
     chunk = 1 if B == 1 else _chunk_size(B, host_workers(mesh), mesh)
     if chord is None:  # members per device of one dispatch (every chunk: one program)
         chord = dispatch_size(B, chunk, mesh) // device_multiple(mesh) >= _CHORD_MIN_MEMBERS
+    num = _HOMOTOPY_STEPS  # homotopy steps without guesses: as many as the farthest member
+    if guesses is None and not any(
+        isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(model)
+    ):  # needs (a power of two: few programs), as `continue_to_model` takes for each one
+        num = bucket_size(_homotopy_steps(_seed(model, sign, method)[0], model), _HOMOTOPY_STEPS)
     # the batched parameters, each with B rows; the rest is shared by every member
     batched, shared = eqx.partition(model, lambda x: eqx.is_array(x) and jnp.ndim(x) > 0)
     batched = jax.tree_util.tree_map(
@@ -495,7 +501,7 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord, far=None):
         m = eqx.combine(params, shared)
         axes = _batched_axes(m)
         if g is None:
-            return _from_reference_batch(m, sign, method, _HOMOTOPY_STEPS, axes)
+            return _from_reference_batch(m, sign, method, num, axes)
         return _search_batch(m, g, sign, method, solver, axes, bool(chord), far)
 
     gaits = padded_map(search, batched, guesses, max_chunk=chunk, mesh=mesh, stage="gait search")
