@@ -102,6 +102,7 @@ def run_multipliers(args):
     import numpy as np
 
     from .. import stability as S
+    from ..gait import vhc_applies
     from ._multiplier_fields import stability_json
 
     kneed = args.model == "kneed"
@@ -111,17 +112,18 @@ def run_multipliers(args):
     # continued from the model's reference gait to this model (any parameters)
     gait, why = find_walker_gait(args, model, args.family)
     z = model.state_to_section(gait.x_plus)
-    gm = S.gait_multipliers_jit(model, z, transverse=not kneed)
+    compass = vhc_applies(model)  # the transverse linearization is the compass gait's
+    gm = S.gait_multipliers_jit(model, z, transverse=compass)
     pc = np.asarray(gm.poincare)
     tr = None if gm.transverse is None else np.asarray(gm.transverse)
     stab = stability_json(gm)
-    if kneed:
+    if not compass:
         stab["multipliers_reason"] = (
-            "the transverse linearization is computed for the compass gait; the kneed "
-            "walker's multipliers are the Poincare map's"
+            "the transverse linearization is computed for the compass gait; the "
+            f"{args.model} walker's multipliers are the Poincare map's"
         )
     trusted = stab["multipliers"] is not None
-    if not trusted and not kneed:
+    if not trusted and compass:
         warn(args, stab["multipliers_reason"])
     if args.png:
         from ..plotting import plot_multipliers_complex

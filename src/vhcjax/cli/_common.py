@@ -192,6 +192,8 @@ def add_model_flags(parser, *, slope=True, slope_default=3.0):
 
 #: The kneed walker's default slope (`KneedWalker.psi`, the slope of its reference gait).
 KNEED_SLOPE_DEG = math.degrees(0.0504)
+#: The simplest walking model's default slope (`SimplestWalker.psi`, 0.009 rad).
+SIMPLEST_SLOPE_DEG = math.degrees(0.009)
 
 
 def add_method_flag(parser):
@@ -284,9 +286,11 @@ def add_model_choice(parser):
     parser.add_argument(
         "--model",
         default="compass",
-        choices=("compass", "kneed"),
-        help="compass gait (thesis) or passive kneed walker (Hsu Chen 2007 "
-        "parameters; --mass-hip defaults to 0.5 kg for it) (default %(default)s)",
+        choices=("compass", "kneed", "simplest"),
+        help="compass gait (thesis), passive kneed walker (Hsu Chen 2007 parameters; "
+        "--mass-hip defaults to 0.5 kg for it) or the simplest walking model (Garcia et al. "
+        "1998: feet of negligible mass; --mass-hip, --gravity and --leg-length default to "
+        "1) (default %(default)s)",
     )
     for action in parser._actions:  # each model's defaults (`walker_from_args`)
         if action.dest in _COMPASS_DEFAULTS:
@@ -295,11 +299,16 @@ def add_model_choice(parser):
             action.default = None
             action.help = (
                 "slope angle in degrees, in (0, 30) (default 3; with --model kneed "
-                f"{KNEED_SLOPE_DEG:.6g}, the slope of its reference gait)"
+                f"{KNEED_SLOPE_DEG:.6g} and with --model simplest {SIMPLEST_SLOPE_DEG:.6g}, "
+                "the slopes of their reference gaits)"
             )
     g = parser.add_argument_group("kneed walker (with --model kneed)")
     for dest, flag, _, text in KNEED_FLAGS:
         g.add_argument(flag, dest=dest, type=POSITIVE, default=None, help=text)
+    g = parser.add_argument_group("simplest walking model (with --model simplest)")
+    g.add_argument(
+        "--leg-length", type=POSITIVE, default=None, help="leg length l in m (default 1)"
+    )
 
 
 def kneed_from_args(args, slope_deg):
@@ -329,13 +338,46 @@ _COMPASS_DEFAULTS = {"mass_hip": 10.0, "mass_leg": 5.0, "a": 0.5, "b": 0.5, "gra
 _COMPASS_ONLY = (("mass_leg", "--mass-leg"), ("a", "--a"), ("b", "--b"))
 
 
+def simplest_from_args(args, slope_deg):
+    """Build and validate a `SimplestWalker` from the flags (unset flags: its defaults)."""
+    from .. import SimplestWalker
+
+    values = {}
+    for dest, flag, field in (
+        ("mass_hip", "--mass-hip", "M"),
+        ("gravity", "--gravity", "g"),
+        ("leg_length", "--leg-length", "l"),
+    ):
+        v = getattr(args, dest, None)
+        if v is None:
+            continue
+        check_finite(flag, v)
+        if v <= 0:
+            raise CLIError(f"{flag} must be positive, got {v}")
+        values[field] = v
+    check_slope_deg(slope_deg)
+    return SimplestWalker(psi=math.radians(slope_deg), **values)
+
+
 def walker_from_args(args, slope_deg=None):
     """The model `--model` names (compass gait by default), built from its flags; a flag
-    of the other model is refused with one line, never ignored."""
-    kneed = getattr(args, "model", "compass") == "kneed"
+    of another model is refused with one line, never ignored."""
+    name = getattr(args, "model", "compass")
+    kneed = name == "kneed"
     if args.slope_deg is None:  # not given: the model's own default
-        args.slope_deg = KNEED_SLOPE_DEG if kneed else 3.0
+        args.slope_deg = {"kneed": KNEED_SLOPE_DEG, "simplest": SIMPLEST_SLOPE_DEG}.get(name, 3.0)
     slope = args.slope_deg if slope_deg is None else slope_deg
+    if name == "simplest":
+        for dest, flag in _COMPASS_ONLY + tuple((d, f) for d, f, _, _ in KNEED_FLAGS):
+            if getattr(args, dest, None) is not None:
+                raise CLIError(f"{flag} is not a parameter of the simplest walking model")
+        if getattr(args, "family", None) is None:
+            args.family = "stable"
+        return simplest_from_args(args, slope)
+    if getattr(args, "leg_length", None) is not None:
+        raise CLIError(
+            "--leg-length is a parameter of the simplest walking model: add --model simplest"
+        )
     if kneed:
         for dest, flag in _COMPASS_ONLY:
             if getattr(args, dest) is not None:
@@ -402,6 +444,13 @@ def describe(args, slope_deg=None):
     from thesis Table 1, e.g. `"slope 3 deg, mH 0.1 kg, m 10 kg"`."""
     slope = args.slope_deg if slope_deg is None else slope_deg
     parts = [slope if isinstance(slope, str) else f"slope {slope:g} deg"]
+    if getattr(args, "model", "compass") == "simplest":
+        parts.append("simplest walking model")
+        for dest, flag in (("mass_hip", "M"), ("gravity", "g"), ("leg_length", "l")):
+            v = getattr(args, dest, None)
+            if v is not None:
+                parts.append(f"{flag} {v:g}")
+        return ", ".join(parts)
     if getattr(args, "model", "compass") == "kneed":
         parts.append("kneed walker")
         extra = (("mass_hip", "--mass-hip", "", ""), ("gravity", "--gravity", "", ""))

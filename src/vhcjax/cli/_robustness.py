@@ -73,6 +73,25 @@ def _gait(args):
     return model, fp.z, fp.x0, float(fp.periods[0]), np.asarray(fp.z)
 
 
+def _in_walker_units(model, value, kind):
+    """A default given for the thesis's walker (20 kg, 1 m, 9.81 m/s^2), in the same
+    proportion to `model`'s own units (`scales`): a scaled walker gets the scaled
+    default. `kind`: `"angle"` (unchanged), `"rate"` (1/s), `"impulse"` (N s),
+    `"force"` (N)."""
+    import math
+
+    s = {k: float(v) for k, v in model.scales().items()}
+    unit = {
+        "angle": 1.0,
+        "rate": 1.0 / s["time"],
+        "impulse": s["mass"] * math.sqrt(s["acceleration"] * s["length"]),
+        "force": s["mass"] * s["acceleration"],
+    }[kind]
+    thesis = {"angle": 1.0, "rate": math.sqrt(9.81), "impulse": 20 * math.sqrt(9.81)}
+    thesis["force"] = 20 * 9.81
+    return float(f"{value * unit / thesis[kind]:.12g}")  # 0.4, not 0.4000000000000001
+
+
 def _stability(args, model, z, out, consequence):
     """Spectral radius of the step map at the gait into `out`; a warning (and
     `gait_stable: false`) when the gait is unstable, saying what that means for the
@@ -136,8 +155,10 @@ def register(subparsers):
         "--half-widths",
         type=HALF_WIDTH,
         nargs=2,
-        default=[0.08, 0.4],
-        help="grid half widths along the two axes (default 0.08 0.4)",
+        default=None,
+        help="grid half widths along the two axes (rad, rad/s; default 0.08 rad for an "
+        "angle and 0.4 rad/s for a rate, for the thesis's walker, scaled with the walker's "
+        "time unit sqrt(l/g))",
     )
     p.add_argument(
         "--grid",
@@ -169,8 +190,9 @@ def register(subparsers):
         "--box",
         type=HALF_WIDTH,
         nargs=3,
-        default=[0.05, 0.2, 0.5],
-        help="half widths of the 3-D box (q1, dq1, dq2)",
+        default=None,
+        help="half widths of the 3-D box (q1 in rad, dq1 and dq2 in rad/s; default 0.05, "
+        "0.2, 0.5 for the thesis's walker, the rates scaled with the walker's time unit)",
     )
     p.set_defaults(func=run_basin)
 
@@ -224,8 +246,9 @@ def register(subparsers):
     p.add_argument(
         "--max",
         type=number(float, lo=0.0, hi=1e6, lo_open=True),
-        default=20.0,
-        help="bisection upper bound",
+        default=None,
+        help="bisection upper bound (N s, or N with --duration; default 20 for the "
+        "thesis's 20 kg walker, in proportion to the walker's own impulse or force unit)",
     )
     p.add_argument(
         "--iterations", type=count(1, 60), default=12, help="bisection halvings (1 to 60)"
@@ -332,6 +355,19 @@ def run_basin(args):
         )
     check_figure_file(args.png, "--png")
     model, z, _, period, zn = _gait(args)
+    if args.half_widths is None:
+        args.half_widths = [
+            _in_walker_units(model, 0.08, "angle")
+            if AXIS_NAMES[a] == "q1"
+            else _in_walker_units(model, 0.4, "rate")
+            for a in axes
+        ]
+    if args.box is None:
+        args.box = [
+            0.05,
+            _in_walker_units(model, 0.2, "rate"),
+            _in_walker_units(model, 0.5, "rate"),
+        ]
     b = basin_slice(
         model,
         z,
@@ -544,6 +580,8 @@ def run_push(args):
         zad = np.einsum("ij,sjk->sik", np.asarray(lin.P_plus), np.asarray(D))
         out["transverse_dzeta_dP"] = Z
         out["max_abs_difference_autodiff_vs_transverse"] = float(np.max(np.abs(zad - Z)))
+    if args.max is None:
+        args.max = _in_walker_units(model, 20.0, "impulse" if args.duration == 0 else "force")
     res = max_push(
         model,
         x_star,

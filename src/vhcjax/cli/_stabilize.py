@@ -141,6 +141,11 @@ def _weights(args):
 
 
 def _check(args):
+    if args.model == "simplest":
+        raise CLIError(
+            "the simplest walking model takes no torques (its legs carry no mass): use a "
+            "compass gait with light feet (--b 0 --mass-leg 1e-3)"
+        )
     if args.model == "kneed" and args.family is not None:
         raise CLIError("--family is a compass-gait flag: the kneed walker has one family")
     if args.model == "compass" and args.family is None:

@@ -101,6 +101,8 @@ def find_gait(model, family="stable", method="auto", guess=None, *, solver="newt
             code = gait.result._value
             if not isinstance(code, jax.core.Tracer) and code == RESULTS.successful._value:
                 break
+        if not isinstance(gait.shooting, jax.core.Tracer):
+            gait = _prefer_labels(gait)  # the method that found it
     else:
         gait = _shooting_gait_of(model, family, guess)
     gait = _clean_failed(gait, guess)

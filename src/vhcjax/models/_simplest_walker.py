@@ -72,6 +72,7 @@ class SimplestWalker(WalkerModel):
     n_dof: ClassVar[int] = 2
     POSITIVE_FIELDS: ClassVar[tuple] = ("M", "l", "g")
     NONNEGATIVE_FIELDS: ClassVar[tuple] = ("min_strike_angle",)
+    UNITS: ClassVar[dict] = {"M": "mass", "l": "length", "g": "acceleration"}
 
     @property
     def time_scale(self):
