@@ -17,7 +17,7 @@ import numpy as np
 
 from .._results import RESULTS
 from ..gait import find_gaits
-from ..models import CompassGait
+from ..models import CompassGait  # the atlas is over the compass gait's mass and length ratios
 from ._flip import _det_and_radius_batch, flip_slopes
 
 

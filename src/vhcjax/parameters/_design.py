@@ -28,7 +28,7 @@ import numpy as np
 
 from .._results import RESULTS, result_names
 from ..gait import find_gait
-from ..models import CompassGait
+from ..models import CompassGait  # design varies the compass gait's parameters (PARAMETERS)
 from ..stability import gait_spectrum
 from ._flip import flip_slope, flip_slopes
 

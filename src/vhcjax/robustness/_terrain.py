@@ -20,7 +20,7 @@ import numpy as np
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, step_unchecked
-from ..models import CompassGait
+from ..models import CompassGait  # a floor step changes the compass gait's guard
 from ..stability import returns_to
 from ._bisection import bisect_threshold
 from ._recovery import recover

@@ -42,7 +42,7 @@ from ..hybrid import (
     step_map,
     step_unchecked,
 )
-from ..models import CompassGait
+from ..models import CompassGait  # the default model (thesis Table 1) where none is given
 from ._transverse import TransverseLinearization, transverse_linearization
 
 #: Stable and unstable period-1 gaits of the default compass gait at 3 degrees
