@@ -574,17 +574,16 @@ def test_continuation_in_calls_equals_the_searches_and_runs_only_its_points():
     and a short call solves only its own points (the rest of its buffer stays unset)."""
     from vhcjax.gait import _continuation as C
 
-    ref = G.reference_model()
-    end = _problem1._with_psi(ref, math.radians(3.6))
-    s = np.linspace(0.0, 1.0, C._CHUNK + 4)
     sign = G.family_sign("stable")  # as the library passes it (an array)
-    z0 = C._seed(sign, "vhc")
+    ref, z0 = C._seed(vj.CompassGait(), sign, "vhc")  # the reference, in its own units
+    end = ref.with_slope(math.radians(3.6))
+    s = np.linspace(0.0, 1.0, C._CHUNK + 4)
     g = C._run_continuation(ref, end, s, z0, sign, "vhc")
     assert (np.asarray(g.result._value) == vj.RESULTS.successful._value).all()
     path = C._path(ref, end)
     for i in (0, C._CHUNK - 1, C._CHUNK, len(s) - 1):
         guess = (1.02 * g.a[i], 0.98 * g.b[i])
-        single = G.find_gait(path(s[i]), "stable", guess=guess)
+        single = G.find_gait(path(s[i]), "stable", "vhc", guess=guess)
         np.testing.assert_allclose([single.a, single.b], [g.a[i], g.b[i]], rtol=0, atol=1e-10)
     k = 3
     s_buf = np.concatenate([s[:k], np.full(C._CHUNK - k, s[k - 1])])

@@ -19,7 +19,7 @@ PSI3 = math.radians(3.0)
 @pytest.fixture(scope="module")
 def gaits3():
     """The stable and the unstable gait at 3 degrees (Newton from rounded seeds)."""
-    m = S.with_slope(CompassGait(), PSI3)
+    m = CompassGait().with_slope(PSI3)
     out = {}
     for fam, seed in (("stable", (0.2187, -1.092, -0.377)), ("unstable", (0.2047, -1.211, -0.712))):
         fp = S._fixed_point_jit(m, jnp.asarray(seed), 1, config=vhcjax.DEFAULT_CONFIG)
@@ -89,7 +89,7 @@ def flip():
     m = CompassGait()
     lo, hi = math.radians(4.25), math.radians(4.5)
     fp = S._fixed_point_jit(
-        S.with_slope(m, lo), jnp.asarray((0.2275, -1.14, -0.20)), 1, config=vhcjax.DEFAULT_CONFIG
+        m.with_slope(lo), jnp.asarray((0.2275, -1.14, -0.20)), 1, config=vhcjax.DEFAULT_CONFIG
     )
     assert fp.result == vhcjax.RESULTS.successful
     return S.period_doubling_slope(lo, hi, np.asarray(fp.z), model=m)
@@ -107,10 +107,10 @@ def test_period_doubling_slope_located_to_1e_4_degrees(flip):
     for dpsi in (-1e-4, 1e-4):
         p = flip.psi + math.radians(dpsi)
         fp = S._fixed_point_jit(
-            S.with_slope(m, p), jnp.asarray(flip.z), 1, config=vhcjax.DEFAULT_CONFIG
+            m.with_slope(p), jnp.asarray(flip.z), 1, config=vhcjax.DEFAULT_CONFIG
         )
         Jfd = S.finite_difference_jacobian_jit(
-            S.with_slope(m, p), fp.z, 1, 1e-5, vhcjax.DEFAULT_CONFIG
+            m.with_slope(p), fp.z, 1, 1e-5, vhcjax.DEFAULT_CONFIG
         )
         signs.append(np.sign(np.linalg.det(np.eye(3) + np.asarray(Jfd))))
     assert signs[0] * signs[1] < 0
@@ -123,7 +123,7 @@ def test_period_two_gait_is_a_fixed_point_of_two_simulator_steps(flip):
     br = S.period2_branch(m, flip, [psi])
     assert br is not None and len(br["psi"]) == 1
     z = br["z"][0]
-    mm = S.with_slope(m, psi)
+    mm = m.with_slope(psi)
     sim = S._simulate_jit(mm, mm.section_to_state(jnp.asarray(z)), 2, config=vhcjax.DEFAULT_CONFIG)
     assert sim.result == vhcjax.RESULTS.successful
     z1 = np.asarray(mm.state_to_section(sim.steps.x_plus[0]))
@@ -199,7 +199,7 @@ def test_cli_bifurcation_json_and_files(tmp_path, capsys):
     assert r3[1] == "successful" and r3[2] == "1"
     # the simulated step period (FAST_CONFIG, after 40 steps) is the Newton gait's period
     fp = S._fixed_point_jit(
-        S.with_slope(CompassGait(), PSI3),
+        CompassGait().with_slope(PSI3),
         jnp.asarray((0.2187, -1.092, -0.377)),
         1,
         config=vhcjax.DEFAULT_CONFIG,
@@ -244,7 +244,7 @@ def test_period_four_gait_at_five_degrees():
     """Thesis 7.4: a four-step gait at 5 degrees. Newton on P^4 from a rounded seed: its
     minimal period is 4, the simulator returns to it after 4 steps, and its P^4
     multipliers (autodiff = central differences) are inside the unit circle."""
-    m5 = S.with_slope(CompassGait(), math.radians(5.0))
+    m5 = CompassGait().with_slope(math.radians(5.0))
     o = S.period_k_orbit(m5, np.array([0.2178, -1.1614, -0.1080]), 4)
     assert o.result == vhcjax.RESULTS.successful and o.minimal_period == 4
     for a in o.multipliers:
@@ -270,7 +270,7 @@ def test_period1_family_is_the_poincare_fixed_point_at_every_slope(gaits3):
         np.testing.assert_allclose(np.asarray(fam.z)[1], ref[family][0], atol=1e-10)
         for p, z, T in zip(psis, np.asarray(fam.z), np.asarray(fam.periods)):
             fp = S._fixed_point_jit(
-                S.with_slope(CompassGait(), p),
+                CompassGait().with_slope(p),
                 jnp.asarray(z) + 1e-4,
                 1,
                 config=vhcjax.DEFAULT_CONFIG,
@@ -284,7 +284,7 @@ def test_period1_family_is_the_poincare_fixed_point_at_every_slope(gaits3):
     fam = vhcjax.period1_family(np.radians([3.5, 4.5]), "stable", model=light)
     assert vhcjax.result_names(fam.result) == ["successful"] * 2
     for p, z in zip(np.radians([3.5, 4.5]), np.asarray(fam.z)):
-        out = vhcjax.step_map(S.with_slope(light, p), jnp.asarray(z))
+        out = vhcjax.step_map(light.with_slope(p), jnp.asarray(z))
         assert float(jnp.max(jnp.abs(out.z_next - z))) < 1e-10
     with pytest.raises(TypeError, match="compass-gait"):
         vhcjax.period1_family([PSI3], model=vhcjax.KneedWalker())

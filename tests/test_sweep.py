@@ -112,20 +112,26 @@ def test_real_ends_are_reported_with_their_cause():
     np.testing.assert_allclose(np.asarray(sw.gaits.x_plus[3]), x16, atol=1e-9)
     # A light hip (1 kg on 5 kg legs): the phi'' ODE of the stable family becomes
     # singular between 4 and 4.5 degrees.
-    sw = vj.sweep(
-        vj.CompassGait(mH=1.0), np.radians([3.5, 4.0, 4.5, 5.0]), "stable", tangents=False
-    )
+    slopes = np.radians([3.5, 4.0, 4.5, 5.0])
+    sw = vj.sweep(vj.CompassGait(mH=1.0), slopes, "stable", "vhc", tangents=False)
     assert sw.tangent is None  # not asked for; the end's test computes its own
     assert vj.result_names(sw.gaits.result) == ["successful"] * 2 + ["singular_phi_ode"] * 2
     ends = sw.ends()
     assert [(round(e["last_slope_deg"], 9), e["result"]) for e in ends] == [
         (4.0, "singular_phi_ode")
     ]
+    # ... the default method ("auto") finds those two by shooting, as shooting alone does
+    auto = vj.sweep(vj.CompassGait(mH=1.0), slopes, "stable", tangents=False)
+    assert vj.result_names(auto.gaits.result) == ["successful"] * 4
+    assert auto.gaits.found_by == ["vhc", "vhc", "shooting", "shooting"]
+    shot = vj.sweep(vj.CompassGait(mH=1.0), slopes[2:], "stable", "shooting", tangents=False)
+    np.testing.assert_allclose(auto.gaits.x_plus[2:], shot.gaits.x_plus, rtol=0, atol=1e-12)
+    assert auto.ends() == []
     # Where the VHC search cannot run at all (a lighter hip still), no end is invented,
     # and shooting finds the gaits the singular phi'' ODE hides.
     light = vj.CompassGait(mH=0.1, m1=10.0, m2=10.0)
     psi = np.radians([2.5, 3.0])
-    assert set(vj.result_names(vj.sweep(light, psi, "stable").gaits.result)) <= {
+    assert set(vj.result_names(vj.sweep(light, psi, "stable", "vhc").gaits.result)) <= {
         "singular_phi_ode",
         "not_converged",
     }

@@ -34,7 +34,7 @@ def gaits():
     solve = jax.jit(
         jax.vmap(
             lambda p, z: vhcjax.fixed_point(
-                S.with_slope(CompassGait(), p), z, 1, config=vhcjax.DEFAULT_CONFIG
+                CompassGait().with_slope(p), z, 1, config=vhcjax.DEFAULT_CONFIG
             )
         )
     )
@@ -82,7 +82,7 @@ def test_poincare_jacobian_equals_central_differences(gaits, mults):
     psis, zs, _ = gaits
     model = CompassGait()
     for i in (1, 4):  # 3 degrees, both families (one compile, two evaluations)
-        m = S.with_slope(model, psis[i])
+        m = model.with_slope(psis[i])
         Jfd = S.finite_difference_jacobian_jit(
             m, jnp.asarray(zs[i]), 1, 1e-5, vhcjax.DEFAULT_CONFIG
         )
@@ -99,7 +99,7 @@ def test_orbit_rebuilt_from_vhc_matches_hybrid_simulation(mults):
         tl = jax.tree_util.tree_map(lambda a: a[i], mults.linearization)
         assert abs(float(tl.period - mults.period[i])) < 1e-9
         np.testing.assert_allclose(tl.x_minus, mults.x_minus[i], atol=1e-8)
-    m = S.with_slope(CompassGait(), math.radians(SLOPES_DEG[1]))
+    m = CompassGait().with_slope(math.radians(SLOPES_DEG[1]))
     xm = np.asarray(tl.x_minus)
     h = 1e-6
     fd = np.stack(
@@ -123,7 +123,7 @@ def _dense(m, x0, ts):
 
 def _orbit_point(psi, z, T, frac=0.4):
     """A point on the gait (hybrid vector field, no event) and its phi data."""
-    m = S.with_slope(CompassGait(), psi)
+    m = CompassGait().with_slope(psi)
     x0 = m.section_to_state(jnp.asarray(z))
     x = np.asarray(_dense(m, x0, jnp.asarray([0.0, frac * T]))[-1])
     theta, dtheta = x[0], x[2]

@@ -109,7 +109,11 @@ from .hybrid import (
     multidomain_step as multidomain_step,
     multidomain_trajectory as multidomain_trajectory,
 )
-from .models import KneedWalker as KneedWalker, PendulumWalker as PendulumWalker
+from .models import (
+    KneedWalker as KneedWalker,
+    PendulumWalker as PendulumWalker,
+    SimplestWalker as SimplestWalker,
+)
 from .parameters import (  # noqa: E402
     Atlas as Atlas,
     DesignResult as DesignResult,

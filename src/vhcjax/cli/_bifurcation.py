@@ -6,20 +6,21 @@ import math
 from ._common import (
     CLIError,
     ComputationFailed,
+    add_method_flag,
     add_model_choice,
     add_model_flags,
     check_figure_file,
+    check_method,
     check_output_file,
     check_slope_deg,
     count,
     describe,
     figure_output,
-    kneed_gait,
+    find_walker_gait,
     model_from_args,
     parse_range,
     print_json,
     progress,
-    vhc_inapplicable,
     walker_from_args,
     warn,
 )
@@ -62,6 +63,7 @@ def register(subparsers):
         "steps per repetition, 0 aperiodic, -1 fell: no periods after the fall; empty "
         "where no period-1 gait was found: result is the search's)",
     )
+    add_method_flag(p)
     p.add_argument("--png", metavar="FILE", help="save the bifurcation diagram")
     p.add_argument(
         "--png-multipliers",
@@ -86,16 +88,7 @@ def register(subparsers):
         default=None,  # set by walker_from_args (a compass-gait flag)
         help="gait family (default stable)",
     )
-    q.add_argument(
-        "--method",
-        choices=["vhc", "shooting"],
-        default=None,
-        help="gait search: vhc = thesis Problem 1, shooting = Problem 2 (default vhc, or "
-        "shooting, said so, where the VHC search's phi'' ODE is singular: it needs q1 "
-        "monotone along the step; the kneed walker: shooting, "
-        "the default there, continued from its gait at the default parameters, Poincare "
-        "multipliers only)",
-    )
+    add_method_flag(q)
     q.add_argument("--png", metavar="FILE", help="save the complex-plane plot")
     q.add_argument("--json", action="store_true", help="print a JSON object")
     q.set_defaults(func=run_multipliers)
@@ -110,50 +103,28 @@ def run_multipliers(args):
     import numpy as np
 
     from .. import stability as S
-    from .._results import result_names
+    from ..gait import vhc_applies
     from ._multiplier_fields import stability_json
 
     kneed = args.model == "kneed"
-    if kneed and args.method != "shooting":
-        raise CLIError(
-            "the kneed walker's gaits are found by shooting (its default): drop --method vhc"
-        )
     model = walker_from_args(args)
+    check_method(args, model)
     check_figure_file(args.png, "--png")
-    why, method = None, args.method
-    if kneed:  # its one gait family, continued from its gait at the default parameters
-        fp, why = kneed_gait(model)
-        found, z = result_names(fp.result), fp.z
-        gm = S.gait_multipliers_jit(model, z, transverse=False)
-    else:
-        from ..gait import find_gait
-
-        # continued from the default model's gait to this model (any parameters)
-        gait = find_gait(model, args.family, args.method, throw=False)
-        why = None if getattr(args, "method_given", True) else vhc_inapplicable(gait)
-        if why:  # the VHC search's assumption fails
-            warn(args, why)
-            method = "shooting"
-            gait = find_gait(model, args.family, method, throw=False)
-        found = result_names(gait.result)
-        z = model.state_to_section(gait.x_plus)
-        gm = None if found != "successful" else S.gait_multipliers_jit(model, z)
-    if gm is None or found != "successful":
-        hint = why or f"try --method {'shooting' if method == 'vhc' else 'vhc'}"
-        raise ComputationFailed(
-            f"no {'kneed-walker' if kneed else args.family} gait found at "
-            f"{args.slope_deg} deg by {method} ({found}); {hint}"
-        )
+    # continued from the model's reference gait to this model (any parameters)
+    gait, why = find_walker_gait(args, model, args.family)
+    z = model.state_to_section(gait.x_plus)
+    compass = vhc_applies(model)  # the transverse linearization is the compass gait's
+    gm = S.gait_multipliers_jit(model, z, transverse=compass)
     pc = np.asarray(gm.poincare)
     tr = None if gm.transverse is None else np.asarray(gm.transverse)
     stab = stability_json(gm)
-    if kneed:
+    if not compass:
         stab["multipliers_reason"] = (
-            "the transverse linearization is computed for the compass gait; the kneed "
-            "walker's multipliers are the Poincare map's"
+            "the transverse linearization is computed for the compass gait; the "
+            f"{args.model} walker's multipliers are the Poincare map's"
         )
     trusted = stab["multipliers"] is not None
-    if not trusted and not kneed:
+    if not trusted and compass:
         warn(args, stab["multipliers_reason"])
     if args.png:
         from ..plotting import plot_multipliers_complex
@@ -168,15 +139,15 @@ def run_multipliers(args):
             plot_multipliers_complex(sets, labels, fh, title=title)
     family = None if kneed else args.family  # the kneed walker: its one family
     out = {"slope_deg": args.slope_deg, "family": family, "z": np.asarray(z), **stab}
-    out["method"] = method
-    if method != args.method:
+    out["method"] = gait.found_by
+    if why:
         out["method_reason"] = why
     out["model"] = args.model
     if args.json:
         print_json(out)
     else:
         what = "kneed-walker gait" if kneed else f"gait of the {args.family} family"
-        print(f"{what} at {args.slope_deg} deg ({method}): z = {np.asarray(z)}")
+        print(f"{what} at {args.slope_deg} deg (found by {gait.found_by}): z = {np.asarray(z)}")
         for i, b in enumerate(pc):
             left = f"{tr[i]:.8f}" if trusted and tr is not None else "(not used)"
             print(f"  transverse {left}   poincare {b:.8f}")
@@ -212,12 +183,13 @@ def run_bifurcation(args):
         check_figure_file(getattr(args, flag), "--" + flag.replace("_", "-"))
     psis = np.radians(slopes)
     bar = progress(total=5, desc="bifurcation")
-    fam = S.period1_family(psis, "stable", model=model)
+    fam = S.period1_family(psis, "stable", model=model, method=args.method)
     ok1 = np.array(result_names(fam.result)) == "successful"
     if not ok1.any():
         raise ComputationFailed(
             "no stable period-1 gait found at any slope (continued from the "
-            "default model's 3-degree gait); check the model flags"
+            "default model's 3-degree gait, by --method " + args.method + "); check the "
+            "model flags"
         )
     bar.update(1)
     mult = S.family_multipliers(model, fam.psi, fam.z, transverse=False)
@@ -252,13 +224,7 @@ def run_bifurcation(args):
     bar.update(1)
     bar.close()
     family_names = result_names(fam.result)
-    if len(sim) < len(slopes):
-        missed = [s for s, ok in zip(slopes, ok1) if not ok]
-        warn(
-            args,
-            f"no period-1 gait found at {len(missed)} of {len(slopes)} slopes "
-            f"({_span(missed)} deg): not simulated (their --csv rows give the search's result)",
-        )
+    missed = [s for s, ok in zip(slopes, ok1) if not ok]
     names = result_names(diag.result)
     aperiodic = np.asarray(diag.period_pattern) == 0
     if aperiodic.any():
@@ -317,6 +283,7 @@ def run_bifurcation(args):
         "first_fall_slope_deg": sim_slopes[int(np.argmax(fell))] if fell.any() else None,
         "num_slopes": len(slopes),
         "num_no_gait": len(slopes) - len(sim),
+        "no_gait_slopes_deg": missed,
         "num_fell": int(fell.sum()),
         "num_aperiodic": int(aperiodic.sum()),
         "transient_steps": args.transient,
@@ -325,11 +292,22 @@ def run_bifurcation(args):
     }
     if not fell.any():
         out["first_fall_slope_deg_reason"] = "no walker fell at any slope simulated"
+    if missed:  # a flip or a fall may lie at a slope without a gait: not a full answer
+        out["period_doubling_slopes_deg_reason"] = (
+            f"no period-1 gait found at {len(missed)} of {len(slopes)} slopes "
+            f"({_span(missed)} deg): a period doubling there is not seen"
+        )
     if args.json:
         print_json(out)
     else:
         for k, v in out.items():
             print(f"{k}: {v}")
+    if missed:
+        raise ComputationFailed(
+            f"incomplete: no period-1 gait found at {len(missed)} of {len(slopes)} slopes "
+            f"({_span(missed)} deg, by --method {args.method}): not simulated, and a "
+            "period doubling there is not seen (their --csv rows give the search's result)"
+        )
     return 0
 
 

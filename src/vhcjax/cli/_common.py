@@ -19,7 +19,9 @@ class CLIError(Exception):
 
 class ComputationFailed(CLIError):
     """The computation failed on valid input (e.g. no gait found): printed as one line,
-    exit status 1."""
+    exit status 1. `result`: the result code of a failed gait search, where one failed."""
+
+    result = "not_converged"
 
 
 class ArgumentError(Exception):
@@ -380,65 +382,92 @@ def add_model_flags(parser, *, slope=True, slope_default=3.0):
         "--a", type=FINITE, default=0.5, help="hip to leg centre of mass in m (default 0.5)"
     )
     g.add_argument(
-        "--b", type=FINITE, default=0.5, help="leg centre of mass to foot in m (default 0.5)"
+        "--b",
+        type=FINITE,
+        default=0.5,
+        help="leg centre of mass to foot in m, 0 for masses at the feet (default 0.5)",
     )
     g.add_argument("--gravity", type=FINITE, default=9.81, help="gravity in m/s^2 (default 9.81)")
     return g
 
 
-#: Section point (q1, dq1, dq2) of the kneed walker's gait at its default slope (0.0504
-#: rad): the default seed of its gait searches.
-KNEED_SEED = (0.18818546, -1.10958733, -0.05714811)
+#: The kneed walker's default slope (`KneedWalker.psi`, the slope of its reference gait).
 KNEED_SLOPE_DEG = math.degrees(0.0504)
+#: The simplest walking model's default slope (`SimplestWalker.psi`, 0.009 rad).
+SIMPLEST_SLOPE_DEG = math.degrees(0.009)
 
 
-def kneed_gait(model, guess=None, flag=None):
-    """The kneed walker's gait on `model`: Newton shooting from `guess` when given, else
-    its gait at the default parameters (`KNEED_SEED`) continued to `model`
-    (`vhcjax.continue_fixed_point`). **Returns:** `(fixed_point, why)`: `why` is `None`
-    on success, else one line saying where and how the search stopped (and that the
-    command's seed `flag`, if it has one, searches from another point)."""
+def add_method_flag(parser):
+    """`--method auto|vhc|shooting`, the gait search of every command that finds a gait."""
+    parser.add_argument(
+        "--method",
+        default="auto",
+        choices=("auto", "vhc", "shooting"),
+        help="gait search: auto = the VHC search (thesis Problem 1) where it applies and "
+        "shooting (Problem 2) wherever it fails; vhc or shooting alone (the VHC search "
+        "is for the compass gait) (default %(default)s)",
+    )
+
+
+def check_method(args, model):
+    """Refuse `--method vhc` for a model the VHC search is not written for."""
+    from ..gait import vhc_applies
+
+    if getattr(args, "method", "auto") == "vhc" and not vhc_applies(model):
+        raise CLIError(
+            f"the VHC search is for the compass gait: --method vhc cannot search the "
+            f"{getattr(args, 'model', 'compass')} walker (use auto or shooting)"
+        )
+
+
+def find_walker_gait(args, model, family="stable", guess=None, flag=None):
+    """The gait a command works on, found by the one gait finder (`vhcjax.find_gait`,
+    `--method`), or a one-line `ComputationFailed`. A warning says when `auto` found it
+    by shooting because the VHC search failed. **Returns:** `(gait, method_reason)`,
+    the reason `None` unless `auto` switched to shooting."""
     import jax.numpy as jnp
 
-    from .. import KneedWalker
-    from .._results import result_names
-    from ..hybrid import continue_fixed_point, fixed_point_jit
+    from .._results import RESULTS, result_names
+    from ..gait import find_gait, vhc_applies
 
-    if guess is not None:
-        fp = fixed_point_jit(model, jnp.asarray(guess, float))
-        code = result_names(fp.result)
-        return fp, None if code == "successful" else f"Newton from {flag} ended {code}"
-    fp, reached = continue_fixed_point(KneedWalker(), KNEED_SEED, model)
-    code = result_names(fp.result)
-    if code == "successful":
-        return fp, None
-    default = KneedWalker()
-    changed = [
-        f"slope {math.degrees(float(reached.psi)):.4g} deg"
-        if name == "psi"
-        else f"{name} {float(getattr(reached, name)):.4g}"
-        for name in ("psi", "ms", "mt", "mh", "a1", "b1", "a2", "b2", "g")
-        if not math.isclose(float(getattr(model, name)), float(getattr(default, name)))
-    ]
-    where = ", ".join(changed) or "the default parameters"
-    return fp, (
-        f"its gait, continued from the default walker (slope {KNEED_SLOPE_DEG:.4g} deg), is "
-        f"last found at {where}; the next step ends {code}"
-        + (f". Give {flag} to search from another point" if flag else "")
-    )
+    check_method(args, model)
+    method = getattr(args, "method", "auto")
+    g = None if guess is None else jnp.asarray(guess, float)
+    gait = find_gait(model, family, method, g, throw=False)
+    code = str(result_names(gait.result))
+    if code != "successful":
+        tried = (
+            "by the VHC search or by shooting"
+            if method == "auto" and vhc_applies(model)
+            else f"by {'the VHC search' if method == 'vhc' else 'shooting'}"
+        )
+        start = f"from {flag} " if guess is not None and flag else ""
+        name = f"{family} " if family and vhc_applies(model) else ""
+        reason = RESULTS[getattr(RESULTS, code)].rstrip(".")
+        hint = "" if method == "auto" else "; try --method auto"
+        error = ComputationFailed(
+            f"no {name}gait found {start}at slope {args.slope_deg:g} deg {tried} "
+            f"({code}: {reason}){hint}"
+        )
+        error.result = code
+        raise error
+    return gait, method_reason(args, model, gait)
 
 
-def vhc_inapplicable(gait):
-    """Why the VHC search does not apply to this model (its phi'' ODE is singular along
-    the arc, e.g. the stance angle is not monotone over the step), or `None`."""
-    from .._results import result_names
+def method_reason(args, model, gait):
+    """Why `auto` found `gait` by shooting (a warning too), or `None`."""
+    from ..gait import vhc_applies
 
-    if gait.method != "vhc" or result_names(gait.result) != "singular_phi_ode":
+    if getattr(args, "method", "auto") != "auto" or not vhc_applies(model):
         return None
-    return (
-        "the VHC search does not apply here (its phi'' ODE is singular along the arc): "
-        "the gait was searched by shooting (Problem 2), which does not need the constraint"
+    if gait.found_by != "shooting":
+        return None
+    why = (
+        "the VHC search (Problem 1) did not find this gait (its assumptions fail here): "
+        "it was found by shooting (Problem 2)"
     )
+    warn(args, why)
+    return why
 
 
 #: Kneed-walker flags: (dest, flag, KneedWalker field, help).
@@ -458,9 +487,11 @@ def add_model_choice(parser):
     parser.add_argument(
         "--model",
         default="compass",
-        choices=("compass", "kneed"),
-        help="compass gait (thesis) or passive kneed walker (Hsu Chen 2007 "
-        "parameters; --mass-hip defaults to 0.5 kg for it) (default %(default)s)",
+        choices=("compass", "kneed", "simplest"),
+        help="compass gait (thesis), passive kneed walker (Hsu Chen 2007 parameters; "
+        "--mass-hip defaults to 0.5 kg for it) or the simplest walking model (Garcia et al. "
+        "1998: feet of negligible mass; --mass-hip, --gravity and --leg-length default to "
+        "1) (default %(default)s)",
     )
     for action in parser._actions:  # each model's defaults (`walker_from_args`)
         if action.dest in _COMPASS_DEFAULTS:
@@ -469,11 +500,16 @@ def add_model_choice(parser):
             action.default = None
             action.help = (
                 "slope angle in degrees, in (0, 30) (default 3; with --model kneed "
-                f"{KNEED_SLOPE_DEG:.6g}, the slope of its reference gait)"
+                f"{KNEED_SLOPE_DEG:.6g} and with --model simplest {SIMPLEST_SLOPE_DEG:.6g}, "
+                "the slopes of their reference gaits)"
             )
     g = parser.add_argument_group("kneed walker (with --model kneed)")
     for dest, flag, _, text in KNEED_FLAGS:
         g.add_argument(flag, dest=dest, type=POSITIVE, default=None, help=text)
+    g = parser.add_argument_group("simplest walking model (with --model simplest)")
+    g.add_argument(
+        "--leg-length", type=POSITIVE, default=None, help="leg length l in m (default 1)"
+    )
 
 
 def kneed_from_args(args, slope_deg):
@@ -503,13 +539,46 @@ _COMPASS_DEFAULTS = {"mass_hip": 10.0, "mass_leg": 5.0, "a": 0.5, "b": 0.5, "gra
 _COMPASS_ONLY = (("mass_leg", "--mass-leg"), ("a", "--a"), ("b", "--b"))
 
 
+def simplest_from_args(args, slope_deg):
+    """Build and validate a `SimplestWalker` from the flags (unset flags: its defaults)."""
+    from .. import SimplestWalker
+
+    values = {}
+    for dest, flag, field in (
+        ("mass_hip", "--mass-hip", "M"),
+        ("gravity", "--gravity", "g"),
+        ("leg_length", "--leg-length", "l"),
+    ):
+        v = getattr(args, dest, None)
+        if v is None:
+            continue
+        check_finite(flag, v)
+        if v <= 0:
+            raise CLIError(f"{flag} must be positive, got {v}")
+        values[field] = v
+    check_slope_deg(slope_deg)
+    return SimplestWalker(psi=math.radians(slope_deg), **values)
+
+
 def walker_from_args(args, slope_deg=None):
     """The model `--model` names (compass gait by default), built from its flags; a flag
-    of the other model is refused with one line, never ignored."""
-    kneed = getattr(args, "model", "compass") == "kneed"
+    of another model is refused with one line, never ignored."""
+    name = getattr(args, "model", "compass")
+    kneed = name == "kneed"
     if args.slope_deg is None:  # not given: the model's own default
-        args.slope_deg = KNEED_SLOPE_DEG if kneed else 3.0
+        args.slope_deg = {"kneed": KNEED_SLOPE_DEG, "simplest": SIMPLEST_SLOPE_DEG}.get(name, 3.0)
     slope = args.slope_deg if slope_deg is None else slope_deg
+    if name == "simplest":
+        for dest, flag in _COMPASS_ONLY + tuple((d, f) for d, f, _, _ in KNEED_FLAGS):
+            if getattr(args, dest, None) is not None:
+                raise CLIError(f"{flag} is not a parameter of the simplest walking model")
+        if getattr(args, "family", None) is None:
+            args.family = "stable"
+        return simplest_from_args(args, slope)
+    if getattr(args, "leg_length", None) is not None:
+        raise CLIError(
+            "--leg-length is a parameter of the simplest walking model: add --model simplest"
+        )
     if kneed:
         for dest, flag in _COMPASS_ONLY:
             if getattr(args, dest) is not None:
@@ -547,6 +616,14 @@ def model_from_args(args, slope_deg=None):
     for flag in ("mass_hip", "mass_leg", "a", "b", "gravity"):
         v = getattr(args, flag)
         check_finite("--" + flag.replace("_", "-"), v)
+        if flag == "b" and v == 0:  # the leg masses at the feet: a valid walker
+            continue
+        if flag == "a" and v == 0:
+            raise CLIError(
+                "--a 0 puts the leg masses at the hip: the swing leg then has no inertia and "
+                "its motion is undetermined (the massless-leg limit, masses at the feet, is "
+                "--b 0 with a light --mass-leg)"
+            )
         if v <= 0:
             raise CLIError(f"--{flag.replace('_', '-')} must be positive, got {v}")
     if slope_deg is None:
@@ -568,6 +645,13 @@ def describe(args, slope_deg=None):
     from thesis Table 1, e.g. `"slope 3 deg, mH 0.1 kg, m 10 kg"`."""
     slope = args.slope_deg if slope_deg is None else slope_deg
     parts = [slope if isinstance(slope, str) else f"slope {slope:g} deg"]
+    if getattr(args, "model", "compass") == "simplest":
+        parts.append("simplest walking model")
+        for dest, flag in (("mass_hip", "M"), ("gravity", "g"), ("leg_length", "l")):
+            v = getattr(args, dest, None)
+            if v is not None:
+                parts.append(f"{flag} {v:g}")
+        return ", ".join(parts)
     if getattr(args, "model", "compass") == "kneed":
         parts.append("kneed walker")
         extra = (("mass_hip", "--mass-hip", "", ""), ("gravity", "--gravity", "", ""))

@@ -9,6 +9,7 @@ from ._common import (
     FINITE,
     POSITIVE,
     CLIError,
+    add_method_flag,
     add_model_flags,
     check_figure_file,
     check_finite,
@@ -83,6 +84,7 @@ def register(subparsers):
         '"initial", "optimum", "history"}',
     )
     p.add_argument("--png", metavar="FILE", help="objective and parameters against iteration")
+    add_method_flag(p)
     p.set_defaults(func=run_design)
 
     a = subparsers.add_parser(
@@ -141,6 +143,7 @@ def register(subparsers):
     )
     a.add_argument("--csv", metavar="FILE", help="one row per cell: " + ", ".join(ATLAS_CSV))
     a.add_argument("--png", metavar="FILE", help="heat map of the flip slope with contours")
+    add_method_flag(a)
     a.set_defaults(func=run_atlas)
 
 
@@ -251,6 +254,7 @@ def run_design(args):
             steps=args.steps,
             learning_rate=args.learning_rate,
             callback=lambda h: bar.update(1),
+            method=args.method,
         )
     except ValueError as e:
         raise CLIError(str(e)) from None
@@ -394,6 +398,7 @@ def run_atlas(args):
         psi_start=math.radians(args.scan_start_deg),
         psi_max=math.radians(args.scan_max_deg),
         step=math.radians(args.scan_step_deg),
+        method=args.method,
     )
     rec = atlas_json(at)
     if args.csv:

@@ -8,19 +8,21 @@ from typing import Any
 from ._common import (
     STATE,
     CLIError,
+    ComputationFailed,
+    add_method_flag,
     add_model_choice,
     add_model_flags,
     check_figure_file,
+    check_method,
     check_output_file,
     check_slope_deg,
     describe,
     figure_output,
-    kneed_gait,
+    find_walker_gait,
     model_from_args,
     parse_range,
     print_json,
     progress,
-    vhc_inapplicable,
     walker_from_args,
     warn,
 )
@@ -44,6 +46,7 @@ CSV_COLUMNS = [
     "step_length",
     "speed",
     *STABILITY_COLUMNS,
+    "method",
 ]
 PARAM_KEYS = ("a", "b", "c", "d", "e", "f", "g", "h", "T", "E0")
 NUMBER_KEYS = PARAM_KEYS + ("step_length", "speed")
@@ -52,11 +55,12 @@ NUMBER_KEYS = PARAM_KEYS + ("step_length", "speed")
 def register(subparsers):
     p = subparsers.add_parser(
         "gait",
-        help="find a periodic gait (VHC search or shooting)",
-        description="Find the periodic gait of the passive compass gait on one slope: the "
-        "VHC search of thesis Problem 1 (unknowns a, b; d from the energy quadratic) or "
-        "shooting on the step-to-step map (Problem 2). Without --guess the gait is "
-        "continued from the known default-model gait, so no starting point is needed.",
+        help="find a periodic gait (VHC search, shooting where it fails)",
+        description="Find the periodic gait of a walker on one slope: the VHC search of "
+        "thesis Problem 1 (unknowns a, b; d from the energy quadratic) where it applies, "
+        "and shooting on the step-to-step map (Problem 2) wherever it fails (--method). "
+        "Without --guess the gait is continued from the model's known reference gait, so "
+        "no starting point is needed.",
     )
     add_model_flags(p)
     add_model_choice(p)
@@ -128,14 +132,7 @@ def _family_method(p, both):
         help="root of the energy quadratic (5.13): stable = thesis (7.3), "
         "unstable = (7.8) (default stable)",
     )
-    p.add_argument(
-        "--method",
-        default=None,
-        choices=("vhc", "shooting"),
-        help="vhc = thesis Problem 1, shooting = Problem 2 (default vhc, and `gait` "
-        "switches to shooting, saying so, where the VHC search's phi'' ODE is singular; "
-        "shooting, the kneed walker's only search, for --model kneed)",
-    )
+    add_method_flag(p)
 
 
 def gait_json(gait, slope_deg) -> dict[str, Any]:
@@ -148,7 +145,7 @@ def gait_json(gait, slope_deg) -> dict[str, Any]:
         "result": result_names(gait.result),
         "slope_deg": slope_deg,
         "family": gait.family,
-        "method": gait.method,
+        "method": gait.found_by,
         "x0": np.asarray(gait.x_plus).tolist(),
         "params": {k: float(getattr(gait, k)) for k in PARAM_KEYS},
         "iterations": int(gait.iterations),
@@ -156,13 +153,25 @@ def gait_json(gait, slope_deg) -> dict[str, Any]:
     }
 
 
+def failed_json(error, args):
+    """The JSON record of a search that found no gait: its code and why, no numbers."""
+    return {
+        "result": getattr(error, "result", "not_converged"),
+        "slope_deg": args.slope_deg,
+        "family": getattr(args, "family", None),
+        "method": args.method,
+        "x0": None,
+        "params": None,
+        "iterations": None,
+        "residual": None,
+        "reason": str(error),
+    }
+
+
 def run_gait(args):
-    import jax.numpy as jnp
-
-    from ..gait import find_gait
-
     if args.guess is not None:
-        sizes = (3,) if args.model == "kneed" else (2, 3) if args.method == "shooting" else (2,)
+        kneed = args.model == "kneed"
+        sizes = (3,) if kneed else (2,) if args.method == "vhc" else (2, 3)
         if len(args.guess) not in sizes:
             raise CLIError(
                 f"--guess takes {' or '.join(map(str, sizes))} numbers here, got {len(args.guess)}"
@@ -176,29 +185,21 @@ def run_gait(args):
             )
         return _run_kneed_gait(args)
     model = walker_from_args(args)
+    check_method(args, model)
     if args.guess is None:  # continued from 3 degrees: in steps of at most 1.5 % of the slope
         _check_solved_slope(args.slope_deg, "without --guess")
-    guess = None if args.guess is None else jnp.asarray(args.guess)
-    gait = find_gait(model, args.family, args.method, guess, throw=False)
-    switched = None if getattr(args, "method_given", True) else vhc_inapplicable(gait)
-    if switched:
-        # the VHC search's assumption fails (its phi'' ODE is singular along the arc):
-        # the gait, if there is one, comes from shooting, which does not need it
-        gait = find_gait(model, args.family, "shooting", guess, throw=False)
+    try:
+        gait, why = find_walker_gait(args, model, args.family, args.guess, "--guess")
+    except ComputationFailed as e:
+        if not args.json:
+            raise
+        print_json(failed_json(e, args))
+        return 1
     rec = gait_json(gait, args.slope_deg)
-    if switched:
-        rec["method_reason"] = switched
-        warn(args, switched)
-    found = rec["result"] == "successful"
-    if not found:  # a failed search has no gait: no parameters, no stability
-        from .._results import RESULTS
-
-        rec["params"] = None
-        rec["x0"] = None
-        rec["reason"] = RESULTS[getattr(RESULTS, rec["result"])]
-        rec["residual"] = None  # no converged gait: the library's value is a placeholder
+    if why:
+        rec["method_reason"] = why
     stab = None
-    if found and not args.no_stability:  # multipliers, two ways
+    if not args.no_stability:  # multipliers, two ways
         from ..stability import gait_multipliers
         from ._multiplier_fields import stability_json
 
@@ -211,16 +212,12 @@ def run_gait(args):
             warn(args, stab["multipliers_reason"])
     if args.json:
         print_json(rec)
-        return 0 if found else 1
+        return 0
     print(
-        f"gait search at {args.slope_deg} deg (family {args.family}, method {rec['method']}): "
+        f"gait search at {args.slope_deg} deg (family {args.family}, found by {rec['method']}): "
         f"{rec['result']}"
     )
-    if not found:
-        hint = "" if switched else f" ({_other_method_hint(rec)})"
-        print(f"  no gait: {rec['reason'].rstrip('.')}{hint}")
-        return 1
-    assert rec["params"] is not None  # set to None only when not found
+    assert rec["params"] is not None
     for k, v in rec["params"].items():
         print(f"  {k:>3} = {v: .9f}")
     print(
@@ -246,52 +243,48 @@ def _none_found(rows, method):
     codes = Counter(r["result"] for r in rows).most_common()
     parts = [f"{name} at {n} slope{'s' if n > 1 else ''}" for name, n in codes]
     first = RESULTS[getattr(RESULTS, codes[0][0])]
-    other = "shooting" if method == "vhc" else "vhc"
-    return f"no gait found: {', '.join(parts)} ({first.rstrip('.')}); try --method {other}"
-
-
-def _other_method_hint(rec):
-    other = "shooting" if rec.get("method") == "vhc" else "vhc"
-    return f"try --method {other}"
+    hint = "" if method == "auto" else "; try --method auto"
+    return f"no gait found: {', '.join(parts)} ({first.rstrip('.')}){hint}"
 
 
 def _run_kneed_gait(args):
     """The kneed walker: shooting (Newton on its step map) and Poincare multipliers."""
     import numpy as np
 
-    from .._results import result_names
     from ..stability import gait_multipliers
 
-    if args.method != "shooting":
-        raise CLIError(
-            "the kneed walker's gaits are found by shooting (its default): drop --method vhc"
-        )
     model = walker_from_args(args)
-    fp, why = kneed_gait(model, args.guess, "--guess")
-    result = result_names(fp.result)
-    found = result == "successful"
+    check_method(args, model)
+    try:
+        gait, _ = find_walker_gait(args, model, "stable", args.guess, "--guess")
+        result, why = "successful", None
+    except ComputationFailed as e:
+        if not args.json:
+            raise
+        gait, result, why = None, getattr(e, "result", "not_converged"), str(e)
+    found = gait is not None
     rec = {  # the compass record's keys (and nulls where nothing was found) where they apply
         "result": result,
         "slope_deg": args.slope_deg,
         "family": None,  # the kneed walker has one family
         "method": "shooting",
         "model": "kneed",
-        "z": np.asarray(fp.z).tolist() if found else None,
-        "x0": np.asarray(fp.x0).tolist() if found else None,
+        "z": np.asarray(gait.z).tolist() if gait is not None else None,
+        "x0": np.asarray(gait.x_plus).tolist() if gait is not None else None,
         "params": None,
         "params_reason": "the gait parameters of (5.2) are the compass gait's: see z and x0",
-        "iterations": int(fp.iterations),
-        "residual": float(fp.residual) if found else None,
+        "iterations": int(gait.iterations) if gait is not None else None,
+        "residual": float(gait.residual) if gait is not None else None,
     }
-    if found:
-        rec["period"] = float(fp.periods[0])
+    if gait is not None:
+        rec["period"] = float(gait.T)
     else:
         rec["reason"] = why
     if found and not args.no_stability:
         # the program of `vhcjax multipliers --model kneed`, and its fields
         from ._multiplier_fields import stability_json
 
-        rec.update(stability_json(gait_multipliers(model, fp.z, transverse=False)))
+        rec.update(stability_json(gait_multipliers(model, gait.z, transverse=False)))
         rec["multipliers_reason"] = (
             "the transverse linearization is computed for the compass gait; the kneed "
             "walker's multipliers are the Poincare map's"
@@ -327,11 +320,13 @@ def sweep_rows(gaits, slopes_deg):
     g = jax.device_get(gaits)  # one transfer, then plain numpy per row
     names = result_names(np.atleast_1d(g.result._value))
     cols = {k: np.atleast_1d(np.asarray(getattr(g, k), float)) for k in NUMBER_KEYS}
+    by = np.atleast_1d(np.asarray(g.shooting))
     rows = []
     for i, (name, slope) in enumerate(zip(names, slopes_deg)):
         row = {"slope_deg": slope, "result": name}
         ok = name == "successful"
         row.update({k: float(v[i]) if ok else None for k, v in cols.items()})
+        row["method"] = ("shooting" if by[i] else "vhc") if ok else None
         rows.append(row)
     return rows
 
@@ -418,6 +413,7 @@ def run_sweep(args):
     for fam, sw in results.items():
         n_ok = sum(r["result"] == "successful" for r in rows[fam])
         summary[fam] = {"found": n_ok, "total": len(slopes), "ends": sw.ends()}
+        summary[fam]["found_by_shooting"] = sum(r["method"] == "shooting" for r in rows[fam])
         if n_ok == 0:  # no end to report: say why nothing was found
             summary[fam]["reason"] = _none_found(rows[fam], args.method)
     if args.json:
@@ -433,7 +429,8 @@ def run_sweep(args):
     else:
         for fam in families:
             s = summary[fam]
-            print(f"{fam}: found at {s['found']} of {s['total']} slopes")
+            by = f" ({s['found_by_shooting']} by shooting)" if s["found_by_shooting"] else ""
+            print(f"{fam}: found at {s['found']} of {s['total']} slopes{by}")
             if "reason" in s:
                 print(f"  {s['reason']}")
             for e in s["ends"]:

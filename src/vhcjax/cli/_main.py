@@ -135,9 +135,6 @@ def main(argv=None):
     except ArgumentError as e:
         print(e, file=sys.stderr)
         return 2
-    args.method_given = getattr(args, "method", None) is not None
-    if getattr(args, "method", "") is None:  # not given: the model's own search
-        args.method = "shooting" if getattr(args, "model", "compass") == "kneed" else "vhc"
     QUIET["on"] = bool(getattr(args, "quiet", False))
     if not QUIET["on"]:
         _first_run_note()

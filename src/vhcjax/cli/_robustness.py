@@ -8,13 +8,14 @@ from ._common import (
     STATE,
     CLIError,
     ComputationFailed,
+    add_method_flag,
     add_model_choice,
     add_model_flags,
     check_figure_file,
     count,
     describe,
     figure_output,
-    kneed_gait,
+    find_walker_gait,
     number,
     print_json,
     progress,
@@ -42,63 +43,58 @@ def _common(p, png_help):
         nargs=3,
         metavar=("Q1", "DQ1", "DQ2"),
         default=None,
-        help="Newton seed for the gait: post-impact q1 (rad), dq1, dq2 (rad/s); "
-        "default: the stable gait, as `vhcjax gait` finds it (the kneed walker: its gait "
-        "continued from the default parameters)",
+        help="seed of the gait search: post-impact q1 (rad), dq1, dq2 (rad/s); "
+        "default: the stable gait, as `vhcjax gait` finds it (continued from the model's "
+        "reference gait)",
     )
+    add_method_flag(p)
     p.add_argument("--json", action="store_true", help="print the results as one JSON object")
     p.add_argument("--png", metavar="FILE", help=png_help)
     p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def _gait(args):
-    """The gait the command analyses, or a one-line error: Newton shooting from `--gait`
-    when given; else the stable gait, found as `vhcjax gait` finds it (continued from
-    the default model's gait to this model and slope, by the VHC search, or by
-    shooting where that fails; the kneed walker: from its gait at the default
-    parameters), then made a fixed point of the step map by Newton shooting from
-    there. Newton from one fixed seed would land on whichever gait is nearest: at 0.5
-    degrees an unstable one, with a heavy hip none."""
-    import jax.numpy as jnp
+    """The gait the command analyses, or a one-line error: the stable gait, found as
+    `vhcjax gait` finds it (`vhcjax.find_gait` with `--method`: continued from the
+    model's reference gait to this model and slope, or searched from `--gait`), then
+    made a fixed point of the step map the simulations use by Newton shooting from
+    there (it moves the gait by the integration tolerance). Newton from one fixed seed
+    would land on whichever gait is nearest: at 0.5 degrees an unstable one, with a
+    heavy hip none."""
     import numpy as np
 
     from .._results import result_names
     from ..hybrid import fixed_point_jit
 
     model = walker_from_args(args)
-    if args.gait is not None:
-        fp = fixed_point_jit(model, jnp.asarray(args.gait, float))
-        if result_names(fp.result) != "successful":
-            raise ComputationFailed(
-                f"no gait found from --gait {args.gait} at slope {args.slope_deg} deg "
-                f"({result_names(fp.result)}); give a better seed"
-            )
-    elif getattr(args, "model", "") == "kneed":
-        fp, why = kneed_gait(model, flag="--gait")
-        if why is not None:
-            raise ComputationFailed(f"no kneed-walker gait found at {args.slope_deg} deg: {why}")
-    else:
-        from ..gait import find_gait
-
-        codes, fp = [], None
-        for method in ("vhc", "shooting"):  # shooting where the VHC search fails
-            gait = find_gait(model, "stable", method, throw=False)
-            code = result_names(gait.result)
-            if code == "successful":  # a fixed point of the step map, from the gait
-                fp = fixed_point_jit(model, model.state_to_section(gait.x_plus))
-                if result_names(fp.result) == "successful":
-                    break
-                code = f"found, but Newton shooting from it ended {result_names(fp.result)}"
-            codes.append(f"{method}: {code}")
-            fp = None
-        if fp is None:
-            raise ComputationFailed(
-                f"no stable gait found at slope {args.slope_deg} deg ({'; '.join(codes)}); "
-                "give --gait to analyse another one"
-            )
-        if codes:  # the VHC search failed: say so, and that shooting found the gait
-            warn(args, f"the VHC search failed ({codes[0]}): the gait was found by shooting")
+    gait, _ = find_walker_gait(args, model, "stable", args.gait, "--gait")
+    z = model.state_to_section(gait.x_plus)
+    fp = fixed_point_jit(model, z)
+    if result_names(fp.result) != "successful":
+        raise ComputationFailed(
+            f"the gait at slope {args.slope_deg:g} deg is no fixed point of the simulated "
+            f"step map (Newton shooting from it ended {result_names(fp.result)})"
+        )
     return model, fp.z, fp.x0, float(fp.periods[0]), np.asarray(fp.z)
+
+
+def _in_walker_units(model, value, kind):
+    """A default given for the thesis's walker (20 kg, 1 m, 9.81 m/s^2), in the same
+    proportion to `model`'s own units (`scales`): a scaled walker gets the scaled
+    default. `kind`: `"angle"` (unchanged), `"rate"` (1/s), `"impulse"` (N s),
+    `"force"` (N)."""
+    import math
+
+    s = {k: float(v) for k, v in model.scales().items()}
+    unit = {
+        "angle": 1.0,
+        "rate": 1.0 / s["time"],
+        "impulse": s["mass"] * math.sqrt(s["acceleration"] * s["length"]),
+        "force": s["mass"] * s["acceleration"],
+    }[kind]
+    thesis = {"angle": 1.0, "rate": math.sqrt(9.81), "impulse": 20 * math.sqrt(9.81)}
+    thesis["force"] = 20 * 9.81
+    return float(f"{value * unit / thesis[kind]:.12g}")  # 0.4, not 0.4000000000000001
 
 
 def _stability(args, model, z, out, consequence):
@@ -164,8 +160,10 @@ def register(subparsers):
         "--half-widths",
         type=HALF_WIDTH,
         nargs=2,
-        default=[0.08, 0.4],
-        help="grid half widths along the two axes (default 0.08 0.4)",
+        default=None,
+        help="grid half widths along the two axes (rad, rad/s; default 0.08 rad for an "
+        "angle and 0.4 rad/s for a rate, for the thesis's walker, scaled with the walker's "
+        "time unit sqrt(l/g))",
     )
     p.add_argument(
         "--grid",
@@ -198,8 +196,8 @@ def register(subparsers):
         type=HALF_WIDTH,
         nargs=3,
         default=None,
-        help="half widths of the 3-D box (q1, dq1, dq2) of --volume-samples "
-        f"(default {' '.join(map(str, BOX))})",
+        help="half widths of the 3-D box (q1 in rad, dq1 and dq2 in rad/s; default 0.05, "
+        "0.2, 0.5 for the thesis's walker, the rates scaled with the walker's time unit)",
     )
     p.set_defaults(func=run_basin)
 
@@ -257,8 +255,9 @@ def register(subparsers):
     p.add_argument(
         "--max",
         type=number(float, lo=0.0, hi=1e6, lo_open=True),
-        default=20.0,
-        help="bisection upper bound",
+        default=None,
+        help="bisection upper bound (N s, or N with --duration; default 20 for the "
+        "thesis's 20 kg walker, in proportion to the walker's own impulse or force unit)",
     )
     p.add_argument(
         "--iterations", type=count(1, 60), default=12, help="bisection halvings (1 to 60)"
@@ -368,10 +367,19 @@ def run_basin(args):
         )
     if args.box is not None and args.volume_samples == 0:
         raise CLIError("--box is the box of --volume-samples: give --volume-samples too")
-    if args.box is None:
-        args.box = list(BOX)
     check_figure_file(args.png, "--png")
     model, z, _, period, zn = _gait(args)
+    if args.half_widths is None:
+        args.half_widths = [
+            _in_walker_units(model, 0.08, "angle")
+            if AXIS_NAMES[a] == "q1"
+            else _in_walker_units(model, 0.4, "rate")
+            for a in axes
+        ]
+    if args.box is None:  # the thesis walker's box, in this walker's units
+        q, dq1, dq2 = BOX
+        rate = lambda v: _in_walker_units(model, v, "rate")  # noqa: E731
+        args.box = [q, rate(dq1), rate(dq2)]
     b = basin_slice(
         model,
         z,
@@ -587,6 +595,8 @@ def run_push(args):
         zad = np.einsum("ij,sjk->sik", np.asarray(lin.P_plus), np.asarray(D))
         out["transverse_dzeta_dP"] = Z
         out["max_abs_difference_autodiff_vs_transverse"] = float(np.max(np.abs(zad - Z)))
+    if args.max is None:
+        args.max = _in_walker_units(model, 20.0, "impulse" if args.duration == 0 else "force")
     res = max_push(
         model,
         x_star,

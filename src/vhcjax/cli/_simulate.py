@@ -5,7 +5,6 @@ import os
 
 from .._io import atomic_open, output_target
 from ._common import (
-    KNEED_SEED,
     STATE,
     CLIError,
     add_model_choice,
@@ -87,12 +86,14 @@ def _check_start(model, x0):
         )
 
 
-def _kneed_start(model):
-    """The post-impact state of the kneed walker's gait at 0.0504 rad, moved to the
-    slope of `model` (the same section point)."""
+def _reference_start(model):
+    """The post-impact state of the model's reference gait (the kneed walker's at 0.0504
+    rad, the simplest walker's at 0.009 rad), moved to the slope of `model` (the same
+    section point)."""
     import jax.numpy as jnp
 
-    return [float(v) for v in model.section_to_state(jnp.asarray(KNEED_SEED))]
+    _, z = model.reference_gait()
+    return [float(v) for v in model.section_to_state(jnp.asarray(z))]
 
 
 def steps_as_dicts(sim):
@@ -128,11 +129,11 @@ def run(args):
 
     model = walker_from_args(args)
     if args.x0 is None:
-        args.x0 = list(THESIS_7_5) if args.model == "compass" else _kneed_start(model)
+        args.x0 = list(THESIS_7_5) if args.model == "compass" else _reference_start(model)
     if len(args.x0) != 2 * model.n_dof:
-        names = "Q1 Q2 DQ1 DQ2" if args.model == "compass" else "Q1 Q2 Q3 DQ1 DQ2 DQ3"
+        names = "Q1 Q2 DQ1 DQ2" if model.n_dof == 2 else "Q1 Q2 Q3 DQ1 DQ2 DQ3"
         raise CLIError(f"--x0 takes {2 * model.n_dof} numbers ({names}) here, got {len(args.x0)}")
-    if args.model == "compass":
+    if hasattr(model, "hip_height"):  # the compass gait
         _check_start(model, args.x0)
     elif bool(model.fallen(jnp.asarray(args.x0[:3], float))):
         raise CLIError(f"--x0 is a fallen kneed walker (angles {args.x0[:3]} rad)")

@@ -6,14 +6,14 @@ import sys
 from ._common import (
     POSITIVE,
     CLIError,
-    ComputationFailed,
+    add_method_flag,
     add_model_choice,
     add_model_flags,
     check_figure_file,
     check_finite,
     count,
     figure_output,
-    kneed_gait,
+    find_walker_gait,
     number,
     print_json,
     read_numbers,
@@ -44,6 +44,7 @@ def register(subparsers):
         default=None,
         help="compass-gait family (default unstable)",
     )
+    add_method_flag(p)
     add_model_choice(p)
     p.add_argument(
         "--q",
@@ -140,6 +141,11 @@ def _weights(args):
 
 
 def _check(args):
+    if args.model == "simplest":
+        raise CLIError(
+            "the simplest walking model takes no torques (its legs carry no mass): use a "
+            "compass gait with light feet (--b 0 --mass-leg 1e-3)"
+        )
     if args.model == "kneed" and args.family is not None:
         raise CLIError("--family is a compass-gait flag: the kneed walker has one family")
     if args.model == "compass" and args.family is None:
@@ -191,24 +197,11 @@ def run_stabilize(args):
     from .._results import RESULTS, result_names
     from ..hybrid import FAST_CONFIG
     from ..plotting import plot_stabilization
-    from ..stability import period1_family
 
     kneed = args.model == "kneed"
     model = walker_from_args(args)
-    if kneed:
-        fp, why = kneed_gait(model)
-        if why is not None:
-            raise ComputationFailed(f"no kneed-walker gait found at {args.slope_deg} deg: {why}")
-        z = fp.z
-    else:
-        psi = math.radians(args.slope_deg)
-        fam = period1_family([psi], args.family, model=model)
-        if result_names(fam.result)[0] != "successful":
-            raise ComputationFailed(
-                f"no {args.family} period-1 gait found at {args.slope_deg} deg "
-                f"({result_names(fam.result)[0]})"
-            )
-        z = fam.z[0]
+    gait, _ = find_walker_gait(args, model, args.family or "stable")
+    z = model.state_to_section(gait.x_plus)
     limit = math.inf if args.torque_limit is None else args.torque_limit
     st = control.stabilize(model, z, jnp.asarray(q), jnp.asarray(r))
     st = eqx.tree_at(lambda s: s.feedback, st, control.with_torque_limit(st.feedback, limit))

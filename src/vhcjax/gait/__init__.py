@@ -6,8 +6,7 @@ from ._continuation import (
     continue_to_model as continue_to_model,
 )
 from ._dispatch import (
-    reference_guess as reference_guess,
-    reference_model as reference_model,
+    vhc_applies as vhc_applies,
 )
 from ._find import (
     find_gait as find_gait,
@@ -22,6 +21,8 @@ from ._gait import (
     Gait as Gait,
     accepted as accepted,
     family_sign as family_sign,
+    gait_in_units as gait_in_units,
+    section_in_units as section_in_units,
 )
 from ._problem1 import (
     BoundaryData as BoundaryData,

@@ -2,6 +2,7 @@
 and the tangent of a gait along a parameter path (implicit differentiation of the
 residual)."""
 
+import dataclasses
 import math
 
 import equinox as eqx
@@ -11,17 +12,15 @@ import jax.numpy as jnp
 from .._batching import report
 from .._programs import stored_jit
 from .._results import RESULTS
-from ._dispatch import _check, _relabel, _search, reference_guess, reference_model
-from ._gait import family_sign
+from ._dispatch import _check, _relabel, _search
+from ._gait import family_sign, gait_in_units, section_in_units
 from ._problem1 import vhc_residual
-from ._shooting import _shoot_eval, complete_guess_jit
+from ._shooting import _shoot_eval
+
 
 # ---------------------------------------------------------------------------------------
 # Continuation (homotopy in the parameters; sweeps in the slope)
 # ---------------------------------------------------------------------------------------
-_HOMOTOPY_LEAVES = ("m1", "m2", "mH", "a", "b", "g", "psi")
-
-
 def _unknowns(gait, method):
     return jnp.stack([gait.a, gait.b]) if method == "vhc" else jnp.stack([gait.a, gait.b, gait.f])
 
@@ -43,16 +42,33 @@ def _tangent(path, s, z, sign, method):
     return jnp.where(jnp.isfinite(t).all(), t, jnp.zeros_like(t))
 
 
+def _mix(kind, p0, p1, s):
+    """A parameter a fraction `s` of the way from `p0` to `p1`: lengths linearly (in the
+    walker's own units they are fractions of its size, and may be zero), every other
+    parameter geometrically where both ends are positive (masses over decades, slopes),
+    else linearly."""
+    p0, p1 = jnp.asarray(p0, dtype=float), jnp.asarray(p1, dtype=float)
+    linear = p0 + (p1 - p0) * s
+    if kind == "length":
+        return linear
+    both = (p0 > 0) & (p1 > 0)
+    q0, q1 = jnp.where(both, p0, 1.0), jnp.where(both, p1, 1.0)
+    return jnp.where(both, q0 * (q1 / q0) ** s, linear)
+
+
 def _path(start, end):
-    r"""$s \mapsto$ model with every physical leaf interpolated geometrically (they are
-    positive) from `start` (s = 0) to `end` (s = 1); `s` may leave [0, 1]."""
+    r"""$s \mapsto$ the model a fraction `s` of the way from `start` (s = 0) to `end`
+    (s = 1), every float parameter at once (`_mix`); `s` may leave [0, 1]."""
+    units = type(end).UNITS
 
     def path(s):
         m = end
-        for name in _HOMOTOPY_LEAVES:
-            p0 = jnp.asarray(getattr(start, name), dtype=float)
-            p1 = jnp.asarray(getattr(end, name), dtype=float)
-            m = eqx.tree_at(lambda mm: getattr(mm, name), m, p0 * (p1 / p0) ** s)
+        for f in dataclasses.fields(end):
+            p0, p1 = getattr(start, f.name, None), getattr(end, f.name)
+            if not eqx.is_inexact_array(p1) or p0 is None:
+                continue
+            value = _mix(units.get(f.name), p0, p1, s)
+            m = eqx.tree_at(lambda mm: getattr(mm, f.name), m, value)
         return m
 
     return path
@@ -162,12 +178,16 @@ def _run_continuation(start, end, s_values, z0, sign, method):
 _HOMOTOPY_STEPS = 16
 
 
-def _seed(sign, method):
-    ref = reference_model()
-    ab = jnp.where(sign < 0, reference_guess("stable"), reference_guess("unstable"))
-    # Compiled as one program: run op by op, each of its ~250 small operations would
-    # compile a program of its own.
-    return ab if method == "vhc" else complete_guess_jit(ref, ab, sign)
+def _seed(model, sign, method):
+    """The start of a continuation to `model` in its own units: `(start, z0)`, the
+    `reference_gait` of the family of `sign` (traced signs choose between the two), its
+    unknowns for `method` ($(a, b)$ for the VHC search, the section point for
+    shooting)."""
+    ref, z_stable = model.reference_gait("stable")
+    _, z_unstable = model.reference_gait("unstable")
+    z = jnp.where(sign < 0, z_stable, z_unstable)
+    z = section_in_units(ref, z, ref.scales()["time"])
+    return ref.in_own_units(), (z[:2] if method == "vhc" else z)
 
 
 #: Largest relative change of a physical parameter in one homotopy step (`num=None`).
@@ -175,34 +195,35 @@ _HOMOTOPY_RATIO = 0.015
 
 
 def _homotopy_steps(start, end):
-    """Steps of the homotopy from `start` to `end`: at least `_HOMOTOPY_STEPS`, and enough
-    that no parameter changes by more than `_HOMOTOPY_RATIO` (relative) in one step."""
+    """Steps of the homotopy from `start` to `end` (`_path`): at least `_HOMOTOPY_STEPS`,
+    and enough that no parameter changes by more than `_HOMOTOPY_RATIO` in one step
+    (relative, or absolute for lengths in the walker's own units)."""
     import numpy as np
 
+    units = type(end).UNITS
+    spread = 0.0
     with np.errstate(invalid="ignore", divide="ignore"):  # an invalid model: bad_input
-        spread = max(
-            float(
-                np.max(
-                    np.abs(
-                        np.log(
-                            np.asarray(getattr(end, name), float)
-                            / np.asarray(getattr(start, name), float)
-                        )
-                    )
-                )
-            )
-            for name in _HOMOTOPY_LEAVES
-        )
+        for f in dataclasses.fields(end):
+            p0, p1 = getattr(start, f.name, None), getattr(end, f.name)
+            if not eqx.is_inexact_array(p1) or p0 is None:
+                continue
+            p0, p1 = np.asarray(p0, float), np.asarray(p1, float)
+            if units.get(f.name) != "length" and np.all(p0 > 0) and np.all(p1 > 0):
+                change = np.abs(np.log(p1 / p0))
+            else:
+                change = np.abs(p1 - p0)
+            spread = max(spread, float(np.max(change)))
     if not np.isfinite(spread):  # the search codes the model bad_input
         return _HOMOTOPY_STEPS
     return max(_HOMOTOPY_STEPS, int(np.ceil(spread / np.log1p(_HOMOTOPY_RATIO))) + 1)
 
 
 def continue_to_model(model, family="stable", method="vhc", num=None):
-    """The `family` gait of `model` without a guess: homotopy from the default model at
-    3 degrees (thesis Table 1, `reference_model`) to `model`, all physical parameters at
-    once (geometric interpolation), in `num` steps with a secant predictor (`None`: at
-    least 16, and no parameter changing by more than 1.5 % in a step).
+    """The `family` gait of `model` without a guess: homotopy from the model's `reference_gait` (for the compass gait the default
+    walker at 3 degrees, thesis Table 1) to `model`, all parameters at once (`_path`), in
+    `num` steps with a secant predictor (`None`: at least 16, and no parameter changing
+    by more than 1.5 % in a step). `method`: `"vhc"` or `"shooting"`. It runs in the
+    walker's own units (`in_own_units`): gravity and size drop out.
 
     **Returns:** a `Gait` (never raises; check `result`).
     """
@@ -210,9 +231,13 @@ def continue_to_model(model, family="stable", method="vhc", num=None):
 
     _check(family, method)
     sign = family_sign(family)
+    own = model.in_own_units()
+    start, z0 = _seed(own, sign, method)
     if num is None:
-        num = _homotopy_steps(reference_model(), model)
-    gaits = _run_continuation(
-        reference_model(), model, np.linspace(0.0, 1.0, num), _seed(sign, method), sign, method
-    )
-    return _relabel(jax.tree_util.tree_map(lambda x: x[-1], gaits), family)
+        num = _homotopy_steps(start, own)
+    gaits = _run_continuation(start, own, np.linspace(0.0, 1.0, num), z0, sign, method)
+    gait = _relabel(jax.tree_util.tree_map(lambda x: x[-1], gaits), family)
+    return _gait_in_units_jit(gait, model)
+
+
+_gait_in_units_jit = eqx.filter_jit(gait_in_units)

@@ -1,8 +1,6 @@
-"""One search by method name, and the reference gait that seeds continuation."""
+"""One search by method name; which methods apply to a model."""
 
-import jax.numpy as jnp
-
-from ._gait import _REFERENCE_AB, _REFERENCE_PSI, FAMILIES, METHODS
+from ._gait import FAMILIES, METHODS
 from ._problem1 import vhc_search
 from ._shooting import shooting_search
 
@@ -37,13 +35,9 @@ def _check(family, method):
         raise ValueError(f"method must be one of {METHODS}, got {method!r}")
 
 
-def reference_model(like=None):
-    """The default model (thesis Table 1) at 3 degrees, where `reference_guess` holds."""
+def vhc_applies(model):
+    """Whether the VHC search (Problem 1) is written for `model`: the two-DOF compass
+    gait (its subclasses with more degrees of freedom are searched by shooting)."""
     from ..models import CompassGait
 
-    return CompassGait(psi=_REFERENCE_PSI)
-
-
-def reference_guess(family="stable"):
-    """$(a, b)$ of the `family` gait of the default model at 3 degrees (a seed)."""
-    return jnp.asarray(_REFERENCE_AB[family])
+    return isinstance(model, CompassGait) and model.n_dof == 2

@@ -1,7 +1,7 @@
 """`find_gait` and `find_gaits`: the gait search as users call it, one gait or a batch."""
 
+import dataclasses
 import math
-import warnings
 
 import equinox as eqx
 import jax
@@ -12,27 +12,55 @@ import numpy as np
 from .._batching import bucket_size, device_multiple, dispatch_size, host_workers, padded_map
 from .._programs import stored_jit
 from .._results import RESULTS
+from ..hybrid import check_section_shape
 from ..solvers import detach
-from ._continuation import _HOMOTOPY_STEPS, _continue, _seed, _unknowns, continue_to_model
+from ._continuation import (
+    _HOMOTOPY_STEPS,
+    _continue,
+    _gait_in_units_jit,
+    _homotopy_steps,
+    _seed,
+    _unknowns,
+    continue_to_model,
+)
 from ._derivatives import with_derivatives
-from ._dispatch import _check, _relabel, _search, reference_model
-from ._gait import _NOISY_RESIDUAL, family_sign
-from ._problem1 import _FAR, _with_psi
+from ._dispatch import _check, _relabel, _search, vhc_applies
+from ._gait import (
+    _NOISY_RESIDUAL,
+    FAMILIES,
+    _make_gait,
+    family_sign,
+    gait_in_units,
+    section_in_units,
+)
+from ._problem1 import _FAR
 
 
-def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newton", throw=True):
-    """Find the periodic gait of `family` on `model`.
+def find_gait(model, family="stable", method="auto", guess=None, *, solver="newton", throw=True):
+    """Find the periodic gait of `family` on `model`: the one gait finder of vhcjax.
 
     **Arguments:**
 
-    - `model`: a `CompassGait` (any masses, lengths, gravity, slope).
-    - `family`: `"stable"` or `"unstable"` (the root of the energy quadratic, 7.3/7.8).
-    - `method`: `"vhc"` (Problem 1) or `"shooting"` (Problem 2).
-    - `guess`: $(a_0, b_0)$ (or $(a_0, b_0, f_0)$ for shooting). `None`: continue the
-      known default-model gait to `model` (homotopy in the parameters).
+    - `model`: any walker model (`CompassGait` with any masses, lengths, gravity and
+      slope, a leg mass at the foot included; `KneedWalker`, `PendulumWalker`,
+      `SimplestWalker`, your own `WalkerModel`).
+    - `family`: `"stable"` or `"unstable"` (for the compass gait the root of the energy
+      quadratic, 7.3/7.8; a model with one known family has `"stable"` alone).
+    - `method`: `"auto"` (default): the VHC search (Problem 1) where it applies (the
+      compass gait), and shooting (Problem 2) wherever it fails, for any reason; so "no
+      gait" is said only when neither finds one. `"vhc"` or `"shooting"`: that method
+      alone (the VHC search is for the compass gait only).
+    - `guess`: compass gait: $(a_0, b_0)$ (or $(a_0, b_0, f_0)$); other models: a section
+      point. `None`: continue the model's `reference_gait` to `model` (a homotopy in the
+      parameters).
     - `solver`: VHC only: `"newton"` (default), `"lm"`, `"optimistix"` or `"optax"`.
     - `throw`: raise if no gait was found (a `ValueError` at once for a non-finite
       guess or an invalid model; with `throw=False` that gait is coded `bad_input`).
+
+    The search runs in the walker's own units (`WalkerModel.in_own_units`: masses,
+    lengths and gravity relative to their sums), so a walker and its scaled copy give
+    the same angles, and tolerances hold in any units. `Gait.found_by` says which method
+    found the gait.
 
     Differentiable (`jax.grad`, `jax.jacfwd`, ...) with respect to every model parameter:
     exact derivatives by the implicit function theorem at the gait, never through the
@@ -41,7 +69,7 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
     **Returns:** a `Gait`.
     """
     _check(family, method)
-    _check_model(model)
+    _check_model(model, method)
     batched = [jnp.shape(x) for x in jax.tree_util.tree_leaves(model) if jnp.ndim(x) > 0]
     if batched:
         raise ValueError(
@@ -51,27 +79,143 @@ def find_gait(model, family="stable", method="vhc", guess=None, *, solver="newto
     if throw and not any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(model)):
         if not bool(_valid(model)):  # one line now, not a runtime error later
             raise ValueError(
-                "the model has a non-positive or non-finite parameter (masses, lengths, "
-                "gravity, slope); with throw=False the gait is coded bad_input"
+                "the model has a parameter out of its range (non-finite, or a mass, length "
+                "or gravity not positive, or a slope outside (0, 30) deg); with throw=False "
+                "the gait is coded bad_input"
             )
     params, model = model, detach(model)  # the search itself is never differentiated
-    if guess is None:
-        gait = continue_to_model(model, family, method)
-    else:
+    if guess is not None:
         guess = detach(jnp.asarray(guess, dtype=float))
-        _check_guess_shape(guess.shape, (), "guess")
         if throw and not isinstance(guess, jax.core.Tracer):
             values = np.asarray(guess)
             if not np.all(np.isfinite(values)):  # one line now, not a runtime error later
                 raise ValueError(f"guess must be finite, got {values.tolist()}")
-        gait = _search_one_jit(model, guess, family_sign(family), method, solver)
-        gait = _relabel(gait, family)
+    if vhc_applies(model):
+        if guess is not None:
+            _check_guess_shape(guess.shape, (), "guess")
+        methods = ("vhc", "shooting") if method == "auto" else (method,)
+        gait = _compass_gait(model, family, methods[0], guess, solver)
+        for m in methods[1:]:
+            code = gait.result._value
+            if not isinstance(code, jax.core.Tracer) and code == RESULTS.successful._value:
+                break
+            gait = _prefer(gait, _compass_gait(model, family, m, guess, solver))
+        if not isinstance(gait.shooting, jax.core.Tracer):
+            gait = _prefer_labels(gait)  # the method that found it
+    else:
+        gait = _shooting_gait_of(model, family, guess)
     gait = _clean_failed(gait, guess)
-    gait = with_derivatives(params, gait, method, family_sign(family))
+    gait = with_derivatives(params, gait, _derivative_method(gait), family_sign(family))
     if throw:
         err = gait.result != RESULTS.successful
         gait = eqx.tree_at(lambda g: g.a, gait, gait.result.error_if(gait.a, err))
     return gait
+
+
+def _derivative_method(gait):
+    """The residual whose implicit derivatives are attached: Problem 1's where every
+    member was found by the VHC search, else Problem 2's (both vanish at the gait)."""
+    return "vhc" if gait.method == "vhc" else "shooting"
+
+
+def _prefer(first, second):
+    """`first` where it succeeded, else `second` (per member; traced results too), except
+    where `second` failed too and `first` found a solution that is no walking gait
+    (`infeasible_uphill`, `other_cycle`, `bad_impact`, `other_root`: a finding, not a failure of its
+    assumptions). The method label becomes `"auto"` where the two differ."""
+    finding = (
+        (first.result == RESULTS.infeasible_uphill)
+        | (first.result == RESULTS.other_cycle)
+        | (first.result == RESULTS.bad_impact)
+        | (first.result == RESULTS.other_root)
+    )
+    ok = (first.result == RESULTS.successful) | (finding & (second.result != RESULTS.successful))
+    if first.method != second.method:
+        first = dataclasses.replace(first, method="auto")
+        second = dataclasses.replace(second, method="auto")
+    return _select(ok, first, second)
+
+
+@eqx.filter_jit
+def _select(ok, first, second):
+    def pick(a, b):
+        if not eqx.is_array(a):
+            return a
+        k = ok.reshape(ok.shape + (1,) * (jnp.ndim(a) - ok.ndim))
+        return jnp.where(k, a, b)
+
+    return jax.tree_util.tree_map(pick, first, second)
+
+
+def _compass_gait(model, family, method, guess, solver):
+    """One method's search for the compass gait, in the walker's own units."""
+    if guess is None:
+        return continue_to_model(model, family, method)
+    own = model.in_own_units()
+    ts = model.scales()["time"]
+    g = guess * jnp.concatenate([jnp.ones(1), jnp.full(guess.shape[0] - 1, ts)])
+    if method == "vhc":  # (a0, b0): a section point's dq2 is for shooting
+        g = g[:2]
+    found = _relabel(_search_one_jit(own, g, family_sign(family), method, solver), family)
+    return _gait_in_units_jit(found, model)
+
+
+def _shooting_gait_of(model, family, guess):
+    """A model without a VHC search: shooting, from `guess` (a section point) or by
+    continuation from the model's `reference_gait` (`continue_fixed_point`), in the
+    walker's own units."""
+    from ..hybrid import continue_fixed_point, fixed_point_jit
+
+    if family not in model_families(model):
+        raise ValueError(
+            f"{type(model).__name__} has the gait families {model_families(model)}, got {family!r}"
+        )
+    own = model.in_own_units()
+    ts = model.scales()["time"]
+    if guess is None:
+        ref, z_ref = model.reference_gait(family)
+        fp, _ = continue_fixed_point(
+            ref.in_own_units(), section_in_units(ref, z_ref, ref.scales()["time"]), own
+        )
+    else:
+        check_section_shape(model, guess, "guess")
+        fp = fixed_point_jit(own, section_in_units(model, guess, ts))
+    return _gait_in_units_jit(_fixed_point_gait(own, fp, family), model)
+
+
+def model_families(model):
+    """The gait families `model` knows a reference gait of (`reference_gait`)."""
+    out = []
+    for family in FAMILIES:
+        try:
+            model.reference_gait(family)
+        except ValueError:
+            continue
+        except NotImplementedError:
+            return list(FAMILIES)  # no reference: any label, a guess is needed
+        out.append(family)
+    return out
+
+
+@eqx.filter_jit
+def _fixed_point_gait(model, fp, family):
+    """The `Gait` of a fixed point of the step map (`vhcjax.fixed_point`)."""
+    from ..hybrid import step_unchecked
+
+    sr = step_unchecked(model, fp.x0)
+    return _make_gait(
+        model,
+        fp.x0,
+        sr.x_minus,
+        fp.periods[0],
+        model.energy(fp.x0),
+        fp.iterations,
+        fp.residual,
+        fp.result,
+        family,
+        "shooting",
+        sr.result != RESULTS.bad_impact,
+    )
 
 
 # ---------------------------------------------------------------------------------------
@@ -94,15 +238,16 @@ _search_one_jit = stored_jit(_search)
 _valid = eqx.filter_jit(lambda model: model.validate())
 
 
-def _check_model(model):
-    """A one-line `ValueError` for a model the gait searches do not cover."""
-    from ..models import CompassGait
+def _check_model(model, method="auto"):
+    """A one-line `ValueError` for a model or method the gait searches do not cover."""
+    from ..mechanics import WalkerModel
 
-    if not isinstance(model, CompassGait):
+    if not isinstance(model, WalkerModel):
+        raise ValueError(f"model must be a walker model, got {type(model).__name__}")
+    if method == "vhc" and not vhc_applies(model):
         raise ValueError(
-            f"find_gait and find_gaits search gaits of a CompassGait, got "
-            f"{type(model).__name__}; for another model use vhcjax.fixed_point (shooting on "
-            "its step map)"
+            f"the VHC search (Problem 1) is written for the two-DOF compass gait, not "
+            f"{type(model).__name__}: use method='auto' or 'shooting'"
         )
 
 
@@ -147,8 +292,10 @@ def _search_single(model, guesses, sign, method, solver, chord, far):
 
 
 def _from_reference(model, sign, method, num=_HOMOTOPY_STEPS):
+    """The continuation of `continue_to_model` in `num` steps (`model` in its own units)."""
     s_buf = jnp.linspace(0.0, 1.0, num)
-    gaits = _continue(reference_model(), model, s_buf, num, _seed(sign, method), sign, method)
+    start, z0 = _seed(model, sign, method)
+    gaits = _continue(start, model, s_buf, num, z0, sign, method)
     return jax.tree_util.tree_map(lambda x: x[-1], gaits)
 
 
@@ -161,74 +308,67 @@ def find_gaits(
     model,
     guesses=None,
     family="stable",
-    method="vhc",
+    method="auto",
     *,
     psi=None,
     solver="newton",
     mesh=None,
     chord=None,
     far=None,
-    vectorise=None,
 ):
     """Batched `find_gait` over guesses, slopes and model parameters; never raises.
 
     **Arguments:**
 
-    - `model`: a `CompassGait`; any parameter may be an array with a leading batch axis.
-    - `guesses`: `(B, 2)` (or `(B, 3)` for shooting) seeds, or `None` for continuation
-      from the reference gait (per member).
-    - `family`, `method`, `solver`: as in `find_gait`.
-    - `psi`: optional `(B,)` slopes (rad), replacing `model.psi`.
+    - `model`: any walker model; any parameter may be an array with a leading batch
+      axis.
+    - `guesses`: `(B, 2)` (or `(B, 3)`) seeds of the compass gait, `(B, 2n - 1)` section
+      points of another model, or `None` for continuation from the model's reference
+      gait (per member).
+    - `family`, `method`, `solver`: as in `find_gait` (`"auto"`: the VHC search, then
+      shooting for the members it missed).
+    - `psi`: optional `(B,)` slopes (rad), replacing the model's slope (`with_slope`).
     - `mesh`: a `jax.sharding.Mesh` with a `"batch"` axis; default: all local devices.
     - `chord`: with `guesses`, finish Newton with chord steps (see `vhc_search`).
       `None` (default): where a device holds 64 or more members.
     - `far`: VHC, with `guesses`: see `vhc_search` (`None`: its default; `math.inf`
       for guesses predicted next to a gait, as `sweep` makes them).
-    - `vectorise`: ignored (every batch is one vectorised Newton loop); kept so that
-      existing calls still run.
 
     With `solver="newton"` one Newton loop iterates every member of a batch, each member
     stopping at its own convergence (`damped_newton_batch`); other solvers run by `vmap`.
     Batches are padded (with copies of the first member) to a power of two, rounded up to
-    a multiple of the device count, so that nearby sizes share one compiled program
-    (`_batching.padded_map`); larger batches run in chunks of 128 per device,
-    concurrently from one host thread per CPU core (`_batching.host_workers`; XLA runs
-    each program on one core). Each chunk is split over the devices of `mesh`.
-    A different split changes the results by rounding only, with the same result codes.
+    a multiple of the device count, so that nearby sizes share one compiled program;
+    larger batches run in chunks of 128 per device, concurrently from one host thread
+    per CPU core (XLA runs each program on one core). Each chunk is split over the
+    devices of `mesh`. A different split changes the results by rounding only, with the
+    same result codes. The searches run in each walker's own units (as `find_gait`).
 
     Differentiable like `find_gait`; a failed member has zero derivatives.
 
-    **Returns:** a `Gait` with a leading batch axis; check `result` per member.
+    **Returns:** a `Gait` with a leading batch axis; check `result` per member and
+    `found_by` for the method that found it.
     """
     _check(family, method)
-    _check_model(model)
-    if vectorise is not None:
-        warnings.warn(
-            "find_gaits(vectorise=...) is ignored: every batch is one vectorised Newton loop",
-            DeprecationWarning,
-            stacklevel=2,
-        )
+    _check_model(model, method)
     if psi is not None:
-        model = _with_psi(model, jnp.asarray(psi, dtype=float))
+        model = model.with_slope(psi)
     params, model = model, detach(model)  # the search itself is never differentiated
     if guesses is not None:
-        guesses = detach(guesses)
-    gaits = _find_gaits(model, guesses, family, method, solver, mesh, chord, far)
-    return with_derivatives(params, gaits, method, family_sign(family))
+        guesses = detach(jnp.atleast_2d(jnp.asarray(guesses, dtype=float)))
+    if vhc_applies(model):
+        gaits = _find_in_units(model, guesses, family, method, solver, mesh, chord, far)
+    else:
+        gaits = _shooting_gaits_of(model, guesses, family)
+    return with_derivatives(params, gaits, _derivative_method(gaits), family_sign(family))
 
 
-def _find_gaits(model, guesses, family, method, solver, mesh, chord, far=None):
-    far = _FAR if far is None else far
-    if not (isinstance(far, float) and math.isinf(far)):  # `inf`: no chart (see vhc_search)
-        far = np.asarray(far, float)  # an argument, not a constant
+def _batch_size(model, guesses):
     sizes = [
         jnp.shape(x)[0]
         for x in jax.tree_util.tree_leaves(model)
         if eqx.is_array(x) and jnp.ndim(x) > 0
     ]
     if guesses is not None:
-        guesses = jnp.atleast_2d(jnp.asarray(guesses, dtype=float))
-        _check_guess_shape(guesses.shape, ("B",), "guesses")
         sizes.append(guesses.shape[0])
     if not sizes:
         raise ValueError("find_gaits needs a batch: guesses, psi or batched model parameters")
@@ -238,6 +378,107 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord, far=None):
             f"find_gaits: the batched inputs (guesses, psi, model parameters) must have one "
             f"length >= 1 (or 1), got lengths {sorted(set(sizes))}"
         )
+    return B
+
+
+def _members(model, B, idx=None):
+    """`model` with every batched leaf broadcast to `B` rows (and taken at `idx`)."""
+
+    def take(x):
+        if not (eqx.is_array(x) and jnp.ndim(x) > 0):
+            return x
+        x = jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:])
+        return x if idx is None else x[idx]
+
+    return jax.tree_util.tree_map(take, model)
+
+
+@eqx.filter_jit
+def _gaits_in_units(gaits, model):
+    B = jnp.shape(gaits.a)[0]
+    model = _members(model, B)
+    return eqx.filter_vmap(gait_in_units, in_axes=(0, _batched_axes(model)))(gaits, model)
+
+
+def _find_in_units(model, guesses, family, method, solver, mesh, chord, far):
+    """The compass-gait batch in the walkers' own units; with `"auto"`, shooting for the
+    members the VHC search missed (every member under `jit`)."""
+    B = _batch_size(model, guesses)
+    own = model.in_own_units()
+    if guesses is not None:
+        _check_guess_shape(guesses.shape, ("B",), "guesses")
+        ts = jnp.broadcast_to(model.scales()["time"], (B,))
+        k = guesses.shape[1]
+        guesses = guesses * jnp.concatenate(
+            [jnp.ones((B, 1)), jnp.broadcast_to(ts[:, None], (B, k - 1))], axis=1
+        )
+    first = "vhc" if method == "auto" else method
+    gaits = _find_gaits(own, guesses, family, first, solver, mesh, chord, far)
+    if method == "auto":
+        code = gaits.result._value
+        if isinstance(code, jax.core.Tracer):
+            redo = _find_gaits(own, guesses, family, "shooting", solver, mesh, chord, far)
+            gaits = _prefer(gaits, redo)
+        else:
+            idx = np.flatnonzero(np.asarray(code) != RESULTS.successful._value)
+            if idx.size:
+                sub = _members(own, B, idx)  # a shared model stays shared
+                g = None if guesses is None else guesses[idx]
+                again = _find_gaits(sub, g, family, "shooting", solver, mesh, chord, far)
+                again = jax.tree_util.tree_map(lambda x: x[: idx.size], again)
+                gaits = dataclasses.replace(gaits, method="auto")
+                missed = jax.tree_util.tree_map(lambda x: x[idx], gaits)
+                again = _prefer(missed, dataclasses.replace(again, method="auto"))
+                gaits = jax.tree_util.tree_map(
+                    lambda a, b: jnp.asarray(a).at[idx].set(b) if eqx.is_array(a) else a,
+                    gaits,
+                    again,
+                )
+                gaits = _prefer_labels(gaits)
+    return _gaits_in_units(gaits, model)
+
+
+def _prefer_labels(gaits):
+    """A batch all found by one method is labelled with it."""
+    by = np.asarray(gaits.shooting)
+    if by.all():
+        return dataclasses.replace(gaits, method="shooting")
+    if not by.any():
+        return dataclasses.replace(gaits, method="vhc")
+    return gaits
+
+
+def _shooting_gaits_of(model, guesses, family):
+    """A batch of a model without a VHC search: `vmap` of the shooting search from
+    `guesses`, or `find_gait` (continuation) member by member."""
+    B = _batch_size(model, guesses)
+    if guesses is None:
+        gaits = [
+            find_gait(_members(model, B, i), family, "shooting", throw=False) for i in range(B)
+        ]
+        return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *gaits)
+    model = _members(model, B)
+    check_section_shape(model, guesses[0], "guesses[i]")
+    return _shooting_batch(model, guesses, family, _batched_axes(model))
+
+
+@eqx.filter_jit
+def _shooting_batch(model, guesses, family, axes):
+    from ..hybrid import fixed_point
+
+    def one(m, z):
+        own = m.in_own_units()
+        fp = fixed_point(own, section_in_units(m, z, m.scales()["time"]))
+        return gait_in_units(_fixed_point_gait(own, fp, family), m)
+
+    return eqx.filter_vmap(one, in_axes=(axes, 0))(model, guesses)
+
+
+def _find_gaits(model, guesses, family, method, solver, mesh, chord, far=None):
+    far = _FAR if far is None else far
+    if not (isinstance(far, float) and math.isinf(far)):  # `inf`: no chart (see vhc_search)
+        far = np.asarray(far, float)  # an argument, not a constant
+    B = _batch_size(model, guesses)
     sign = family_sign(family)
     if B == 1 and guesses is not None:  # one member: no batching to trace or run
         gaits = _search_single(model, guesses, sign, method, solver, bool(chord), far)
@@ -246,6 +487,11 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord, far=None):
     chunk = 1 if B == 1 else _chunk_size(B, host_workers(mesh), mesh)
     if chord is None:  # members per device of one dispatch (every chunk: one program)
         chord = dispatch_size(B, chunk, mesh) // device_multiple(mesh) >= _CHORD_MIN_MEMBERS
+    num = _HOMOTOPY_STEPS  # homotopy steps without guesses: as many as the farthest member
+    if guesses is None and not any(
+        isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(model)
+    ):  # needs (a power of two: few programs), as `continue_to_model` takes for each one
+        num = bucket_size(_homotopy_steps(_seed(model, sign, method)[0], model), _HOMOTOPY_STEPS)
     # the batched parameters, each with B rows; the rest is shared by every member
     batched, shared = eqx.partition(model, lambda x: eqx.is_array(x) and jnp.ndim(x) > 0)
     batched = jax.tree_util.tree_map(
@@ -256,7 +502,7 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord, far=None):
         m = eqx.combine(params, shared)
         axes = _batched_axes(m)
         if g is None:
-            return _from_reference_batch(m, sign, method, _HOMOTOPY_STEPS, axes)
+            return _from_reference_batch(m, sign, method, num, axes)
         return _search_batch(m, g, sign, method, solver, axes, bool(chord), far)
 
     gaits = padded_map(search, batched, guesses, max_chunk=chunk, mesh=mesh, stage="gait search")

@@ -1,7 +1,5 @@
 """The `Gait` pytree: one periodic gait (thesis (5.2)) and the quantities derived from it."""
 
-import math
-
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -10,7 +8,8 @@ from .._results import RESULTS
 from ..hybrid import SolverConfig
 
 FAMILIES = ("stable", "unstable")
-METHODS = ("vhc", "shooting")
+#: `"auto"`: the VHC search where it applies and succeeds, shooting wherever it fails.
+METHODS = ("auto", "vhc", "shooting")
 
 #: Settings of the $\phi''$ integration (smooth, no events: an 8th-order method).
 VHC_CONFIG = SolverConfig(rtol=1e-12, atol=1e-12, max_steps=512, solver="dopri8")
@@ -41,15 +40,6 @@ def accepted(residual, error):
     return (residual < SUCCESS_TOL) | ((error < ERROR_TOL) & (residual < _NOISY_RESIDUAL))
 
 
-# Known gaits of the default model (thesis Table 1) at 3 degrees: (a, b). Seeds for
-# continuation only (they need not be exact; tests check the gaits found from them).
-_REFERENCE_PSI = math.radians(3.0)
-_REFERENCE_AB = {
-    "stable": (0.2186687938, -1.0923835909),
-    "unstable": (0.2046755397, -1.2105718434),
-}
-
-
 class Gait(eqx.Module):
     """A periodic gait (one step, symmetric), thesis (5.2).
 
@@ -60,9 +50,13 @@ class Gait(eqx.Module):
     - `x_plus`, `x_minus`: post- and pre-impact states $[q, \\dot q]$.
     - `step_length`: distance between the feet at heel strike (m); `speed`: step length
       over period (m/s); `energy_loss`: kinetic energy lost in the impact (J).
-    - `iterations`, `residual`: of the search (max-norm of the final residual).
+    - `iterations`, `residual`: of the search (max-norm of the final residual, in the
+      walker's own units: angles and velocities times `scales()["time"]`).
+    - `shooting`: boolean, found by shooting (Problem 2) rather than by the VHC search
+      (per member in a batch; `found_by` names it).
     - `result`: a `RESULTS` code.
-    - `family`, `method`: static labels.
+    - `family`: static label; `method`: static, the method that found every member
+      (`"vhc"` or `"shooting"`), or `"auto"` for a batch found by both.
     """
 
     a: jax.Array
@@ -82,6 +76,7 @@ class Gait(eqx.Module):
     energy_loss: jax.Array
     iterations: jax.Array
     residual: jax.Array
+    shooting: jax.Array
     result: RESULTS
     family: str = eqx.field(static=True, default="stable")
     method: str = eqx.field(static=True, default="vhc")
@@ -90,6 +85,15 @@ class Gait(eqx.Module):
     def z(self):
         """Section coordinates $(q_1, \\dot q_1, \\dot q_2)$ of the post-impact state."""
         return jnp.stack([self.a, self.b, self.f], axis=-1)
+
+    @property
+    def found_by(self):
+        """`"vhc"` or `"shooting"`: the method that found the gait (host side; a list for
+        a batch)."""
+        import numpy as np
+
+        by = np.where(np.asarray(self.shooting), "shooting", "vhc")
+        return str(by) if by.ndim == 0 else by.tolist()
 
     def params(self):
         """`{"a": ..., ..., "h": ..., "T": ..., "E0": ...}` (arrays)."""
@@ -148,10 +152,45 @@ def _make_gait(
         energy_loss=loss,
         iterations=jnp.asarray(iterations),
         residual=residual,
+        shooting=jnp.asarray(method == "shooting"),
         result=code,
         family=family,
         method=method,
     )
+
+
+def section_in_units(model, z, factor):
+    """Section point `z` of `model` with its velocities multiplied by `factor` (angles
+    unchanged): `factor = model.scales()["time"]` takes it to the walker's own units
+    (`in_own_units`), its inverse back."""
+    n = model.n_dof
+    x = model.section_to_state(z)
+    return model.state_to_section(x * jnp.concatenate([jnp.ones(n), jnp.full(n, factor)]))
+
+
+def gait_in_units(gait, model):
+    """`gait`, found on `model.in_own_units()`, in the units of `model`: the same angles,
+    velocities divided by the time unit, the period times it; energies, step length and
+    speed computed on `model`. Codes, iterations and the (dimensionless) residual are
+    kept. One gait (`vmap` it for a batch)."""
+    ts = model.scales()["time"]
+    n = model.n_dof
+    v = jnp.concatenate([jnp.ones(n), jnp.full(n, 1.0 / ts)])
+    x_plus, x_minus = gait.x_plus * v, gait.x_minus * v
+    out = _make_gait(
+        model,
+        x_plus,
+        x_minus,
+        gait.T * ts,
+        model.energy(x_plus),
+        gait.iterations,
+        gait.residual,
+        gait.result,
+        gait.family,
+        gait.method,
+        jnp.asarray(True),  # the impact was checked in the search
+    )
+    return eqx.tree_at(lambda g: g.shooting, out, gait.shooting)
 
 
 def _label(family):

@@ -59,10 +59,6 @@ from ._vhc import phi_second_derivative, singularity_terms
 # ---------------------------------------------------------------------------------------
 # Algebra of Problem 1
 # ---------------------------------------------------------------------------------------
-def _with_psi(model, psi):
-    return eqx.tree_at(lambda m: m.psi, model, jnp.asarray(psi, dtype=float))
-
-
 def impact_configuration(model, a):
     """Post-impact $q^+ = (a, e)$ and pre-impact $q^- = (c, g)$ configurations (5.5)-(5.6)."""
     n = model.n_dof
@@ -141,6 +137,26 @@ def quadratic_coefficients(model, a, b):
     """$(A, B, C)$ of $A d^2 + B d + C = E(c, d) - E(a, b)$ (thesis 5.13-5.14), from the
     energy difference at $d = -1, 0, 1$ (exact: it is a quadratic in $d$)."""
     return _quadratic(model, _impact_data(model, a), b)
+
+
+#: Relative size of $P_{12}$ below which the roots of (5.13) label no family: with the
+#: leg masses at the feet ($b = 0$) the pre-impact $\dot q_2$ does not enter the
+#: post-impact $\dot q_1$, and (5.13) in $(a, b)$ degenerates.
+_P12_DEGENERATE = 1e-8
+
+
+def on_other_root(model, x_plus, x_minus, family):
+    """Whether the gait through `x_plus`, `x_minus` has its $d$ at the root of (5.13) that
+    is not `family`'s (its label: `other_cycle`). The family's root
+    $(-B + s\\sqrt\\Delta)/2A$ lies on the side of the vertex $-B/2A$ where
+    $s(2Ad + B) > 0$. False where (5.13) has no real root or the labelling degenerates
+    ($P_{12} \approx 0$, `_P12_DEGENERATE`)."""
+    n = model.n_dof
+    a, b, d = x_plus[0], x_plus[n], x_minus[n]
+    data = _impact_data(model, a)
+    A, B, C = _quadratic(model, data, b)
+    defined = jnp.abs(data.P[0, 1]) > _P12_DEGENERATE * jnp.max(jnp.abs(data.P))
+    return defined & (B**2 - 4 * A * C >= 0) & (family_sign(family) * (2 * A * d + B) < 0)
 
 
 def solve_for_d(model, a, b, family):
@@ -443,9 +459,7 @@ def _unmirror(model, gait, up, family):
         "vhc",
     )
     # a gait (walking downhill, impact physical) whose d is the other root
-    a, b, d = x_plus[0], x_plus[n], x_minus[n]
-    A, B, C = quadratic_coefficients(model, a, b)
-    other = (B**2 - 4 * A * C >= 0) & (family_sign(family) * (2 * A * d + B) < 0)
+    other = on_other_root(model, x_plus, x_minus, family)
     code = RESULTS.where(
         (out.result == RESULTS.successful) & other, RESULTS.other_cycle, out.result
     )

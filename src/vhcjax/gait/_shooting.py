@@ -8,9 +8,9 @@ from .. import hybrid as _poincare
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, step_unchecked
-from ._gait import _LOOSE_TOL, _RESIDUAL_CAP, _label, _make_gait, accepted, family_sign
+from ._gait import _LOOSE_TOL, _RESIDUAL_CAP, _label, _make_gait, accepted
 from ._newton_search import _each_member, _newton_search
-from ._problem1 import _impact_data, _quadratic, _with_tolerance, solve_for_d, velocity_relations
+from ._problem1 import _with_tolerance, on_other_root, solve_for_d, velocity_relations
 
 
 # ---------------------------------------------------------------------------------------
@@ -169,14 +169,7 @@ def _shooting_newton(
 def _shooting_gait(model, x_plus, x_minus, T, iters, res, code, family, physical):
     """`physical`: the step's impact was checked (`step_unchecked` flags `RESULTS.bad_impact`)."""
     E0 = model.energy(x_plus)
-    # Which root of the energy quadratic A d^2 + B d + C (5.13) is this gait's d? The
-    # family's root (-B + sign sqrt(disc)) / 2A lies on the side of the vertex -B/2A
-    # where sign (2 A d + B) > 0; d is nearer the other root iff that is negative.
-    n = model.n_dof
-    a, b = x_plus[0], x_plus[n]
-    A, B, C = _quadratic(model, _impact_data(model, a), b)
-    d = x_minus[n]
-    wrong = (B**2 - 4 * A * C >= 0) & (family_sign(family) * (2 * A * d + B) < 0)
+    wrong = on_other_root(model, x_plus, x_minus, family)  # the root of (5.13) of its d
     code = RESULTS.where((code == RESULTS.successful) & wrong, RESULTS.other_cycle, code)
     return _make_gait(
         model, x_plus, x_minus, T, E0, iters, res, code, _label(family), "shooting", physical

@@ -6,6 +6,7 @@ Newton search (`find_gaits`) then solves the whole slope vector at once, and slo
 misses are retried from their nearest solved neighbour.
 """
 
+import dataclasses
 import math
 
 import equinox as eqx
@@ -16,10 +17,10 @@ from .._batching import padded_map
 from .._programs import stored_jit
 from .._results import RESULTS
 from ._continuation import _run_continuation, _tangent, _unknowns, continue_to_model
-from ._dispatch import _check, _relabel
-from ._find import find_gaits
-from ._gait import _REFERENCE_PSI, Gait, family_sign
-from ._problem1 import _with_psi, quadratic_coefficients
+from ._dispatch import _check, _relabel, vhc_applies
+from ._find import _gaits_in_units, _prefer, find_gaits
+from ._gait import Gait, family_sign
+from ._problem1 import quadratic_coefficients
 
 
 # ---------------------------------------------------------------------------------------
@@ -185,7 +186,7 @@ def _hermite(ps, pa, za, ta):
 @stored_jit
 def _tangents_padded(model, psis, zs, sign, method):
     def one(p, z):
-        return _tangent(lambda q: _with_psi(model, q), p, z, sign, method)
+        return _tangent(lambda q: model.with_slope(q), p, z, sign, method)
 
     return jax.vmap(one)(psis, zs)
 
@@ -204,7 +205,7 @@ def _tangents(model, psis, zs, sign, method):
     )
 
 
-def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_STEP, tangents=True):
+def sweep(model, slopes, family="stable", method="auto", *, anchor_step=ANCHOR_STEP, tangents=True):
     r"""The `family` gait at every slope of `slopes` (rad).
 
     1. The gait of `model` at 3 degrees, from the reference gait by homotopy in the
@@ -220,6 +221,9 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
        on as a gait of the other family are coded `other_root`.
 
     The slopes may come in any order. `Sweep.ends()` says where and why the family ends.
+    `method="auto"` (default) sweeps with the VHC search and then sweeps the slopes it
+    missed by shooting (`Gait.found_by` says which found each gait). The sweep runs in
+    the walker's own units (`WalkerModel.in_own_units`).
 
     **Returns:** a `Sweep` (`tangent` is $dz^*/d\psi$, zero where no gait was found;
     `tangents=False` leaves it out, computing it only where a retry or a fold test needs
@@ -228,6 +232,11 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
     import numpy as np
 
     _check(family, method)
+    if not vhc_applies(model):
+        raise ValueError(
+            f"sweep follows gait families of the compass gait, not {type(model).__name__}: "
+            "use find_gaits with psi=..."
+        )
     psi = np.asarray(slopes, dtype=float)
     if psi.ndim > 1:
         raise ValueError(f"sweep: slopes must be one-dimensional, got shape {psi.shape}")
@@ -238,16 +247,67 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
         raise ValueError("sweep: slopes must be finite and positive (rad)")
     if np.any(psi < MIN_SLOPE):
         raise ValueError(f"sweep: slopes below {MIN_SLOPE:g} rad are not solved")
+    own = model.in_own_units()
+    first = "vhc" if method == "auto" else method
+    gaits, tangent, edge_tangent = _sweep(own, psi, family, first, anchor_step, tangents)
+    if method == "auto":
+        miss = np.flatnonzero(np.asarray(gaits.result._value) != RESULTS.successful._value)
+        if miss.size:
+            g2, t2, e2 = _sweep(own, psi[miss], family, "shooting", anchor_step, tangents)
+            gaits = dataclasses.replace(gaits, method="auto")
+            missed = jax.tree_util.tree_map(lambda x: x[miss], gaits)
+            g2 = _prefer(missed, dataclasses.replace(g2, method="auto"))
+            gaits = _put_members(gaits, miss, g2)
+            if tangent is not None and t2 is not None:
+                tangent = tangent.at[miss].set(t2[:, :2])  # (da/dpsi, db/dpsi)
+            edge_tangent = edge_tangent.at[miss].set(e2)
+            gaits = _label_by_method(gaits)
+    # back to the model's units: velocities and their tangents over the time unit
+    ts = float(model.scales()["time"])
+    gaits = _gaits_in_units(gaits, model.with_slope(jnp.asarray(psi)))
+    if tangent is not None:
+        tangent = tangent.at[:, 1:].divide(ts)
+    edge_tangent = edge_tangent / ts
+    return Sweep(jnp.asarray(psi), gaits, tangent, edge_tangent)
+
+
+def _put_members(gaits, idx, values):
+    """`gaits` with the members at `idx` replaced by `values` (host side)."""
+    import numpy as np
+
+    def put(a, b):
+        if not eqx.is_array(a):
+            return a
+        a = np.array(a)
+        a[idx] = np.asarray(b)
+        return jnp.asarray(a)
+
+    return jax.tree_util.tree_map(put, gaits, values)
+
+
+def _label_by_method(gaits):
+    import numpy as np
+
+    by = np.asarray(gaits.shooting)
+    if by.all() or not by.any():
+        return dataclasses.replace(gaits, method="shooting" if by.all() else "vhc")
+    return gaits
+
+
+def _sweep(model, psi, family, method, anchor_step, tangents):
+    """`sweep` with one method, in the model's units: `(gaits, tangent, edge_tangent)`."""
+    import numpy as np
+
     order = np.argsort(psi, kind="stable")
     ps = psi[order]
     sign = family_sign(family)
-    # 1. the gait at 3 degrees (the reference slope) for this model
-    p0 = _REFERENCE_PSI
-    anchor_model = _with_psi(model, p0)
+    # 1. the gait at the reference slope (3 degrees for the compass gait) for this model
+    p0 = float(model.reference_gait(family)[0].psi)
+    anchor_model = model.with_slope(p0)
     z0 = _unknowns(continue_to_model(anchor_model, family, method), method)
 
     # 2. coarse continuation from there over the slope range (path psi = p0 e^s)
-    end = _with_psi(model, p0 * math.e)
+    end = model.with_slope(p0 * math.e)
     pa, za = [], []
     for grid in (
         _anchor_grid(p0, max(ps[-1], p0), anchor_step),
@@ -290,8 +350,7 @@ def sweep(model, slopes, family="stable", method="vhc", *, anchor_step=ANCHOR_ST
     edge_tangent = np.where(edge, np.abs(tangent).max(axis=-1), 0.0)
     gaits = jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x)[inverse]), gaits)
     gaits = _relabel(gaits, family)
-    return Sweep(
-        jnp.asarray(psi),
+    return (
         gaits,
         jnp.asarray(tangent[inverse]) if tangents else None,
         jnp.asarray(edge_tangent[inverse]),
@@ -381,7 +440,7 @@ def _discriminant_rate_padded(model, psis, zs, ts):
     of change along the family (direction $(1, dz^*/d\\psi)$ = `(1, ts)`)."""
 
     def relative(p, z):
-        A, B, C = quadratic_coefficients(_with_psi(model, p), z[0], z[1])
+        A, B, C = quadratic_coefficients(model.with_slope(p), z[0], z[1])
         return (B**2 - 4 * A * C) / B**2
 
     def one(p, z, t):

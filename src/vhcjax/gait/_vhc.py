@@ -94,12 +94,15 @@ def phi_second_derivative(model, E0, theta, phi, dphi):
 
 
 def singularity_terms(model, E0, theta, phi, dphi):
-    r"""$(\dot	heta^2, \det A)$ of `phi_second_derivative` without the forces: where the
-    ODE (5.19) is singular ($\dot	heta^2 \le 0$ or $\det A = 0$). Inputs are
-    `stop_gradient`-ed: a check, not part of any derivative."""
+    r"""$(\dot\theta^2, \det A / \prod_j \|A_{:,j}\|)$ of `phi_second_derivative`
+    without the forces: where the ODE (5.19) is singular ($\dot\theta^2 \le 0$ or
+    $\det A = 0$). The determinant is taken relative to the product of the column norms
+    (Hadamard's bound, so it lies in [-1, 1]): unit-free, the same for a walker and its
+    scaled copy. Inputs are `stop_gradient`-ed: a check, not part of any derivative."""
     E0, theta, phi, dphi = jax.lax.stop_gradient((E0, theta, phi, dphi))
     A, dtheta_sq = _linear_system(model, E0, *constraint(theta, phi, dphi))
-    return dtheta_sq, mech.det_small(A)
+    scale = jnp.prod(jnp.sqrt(jnp.sum(A * A, axis=0)))
+    return dtheta_sq, mech.det_small(A) / jnp.where(scale > 0, scale, 1.0)
 
 
 def phi_vector_field(theta, y, args):

@@ -100,6 +100,51 @@ class WalkerModel(eqx.Module):
             parts.append(f"{field.name}={text}")
         return f"{type(self).__name__}({', '.join(parts)})"
 
+    # ---- model facts the algorithms read (slope, units, a known gait) -----------------
+    #: The physical dimension of each float parameter: `"mass"` (kg), `"length"` (m),
+    #: `"acceleration"` (gravity, m/s^2); parameters not named are dimensionless (angles,
+    #: ratios). `in_own_units` and the unit-free algorithms read it.
+    UNITS: ClassVar[dict] = {}
+
+    def with_slope(self, psi):
+        """This model on the slope `psi` (rad; may be an array, e.g. one slope per batch
+        member). Models whose slope is not the field `psi` override it."""
+        return eqx.tree_at(lambda m: m.psi, self, jnp.asarray(psi, dtype=float))
+
+    def reference_gait(self, family="stable"):
+        """A gait of `family` known on a model of this kind: `(model, z)` with `z` its
+        section point (accurate enough to start Newton), from which `vhcjax.find_gait`
+        continues the gait to other parameters. Models that know none raise
+        `NotImplementedError`: give `find_gait` a guess."""
+        raise NotImplementedError(
+            f"{type(self).__name__} knows no reference gait: give find_gait a guess "
+            "(a section point of the gait)"
+        )
+
+    def scales(self):
+        r"""The walker's own units: `{"mass", "length", "acceleration", "time"}`, the sums
+        of its parameters of each dimension (`UNITS`) and $\sqrt{L/g}$. Tolerances,
+        thresholds and search ranges of the algorithms are relative to these."""
+        sums: dict = {"mass": 0.0, "length": 0.0, "acceleration": 0.0}
+        for name, kind in self.UNITS.items():
+            sums[kind] = sums[kind] + jnp.asarray(getattr(self, name), dtype=float)
+        for kind in sums:  # a model without parameters of a dimension: unit 1
+            if isinstance(sums[kind], float):
+                sums[kind] = jnp.asarray(1.0)
+        sums["time"] = jnp.sqrt(sums["length"] / sums["acceleration"])
+        return sums
+
+    def in_own_units(self):
+        """The same walker in its own units (`scales`): masses, lengths and gravity
+        divided by their sums, so that they sum to 1. Its motions are this walker's with
+        the same angles and time divided by `scales()["time"]`."""
+        s = self.scales()
+        out = self
+        for name, kind in self.UNITS.items():
+            value = jnp.asarray(getattr(self, name), dtype=float) / s[kind]
+            out = eqx.tree_at(lambda m: getattr(m, name), out, value)
+        return out
+
     @abc.abstractmethod
     def kinetic_energy(self, q, dq, base_velocity=None): ...
 

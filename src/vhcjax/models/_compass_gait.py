@@ -1,5 +1,6 @@
 """The passive compass-gait biped of thesis chapter 3 (Fig. 3.1, Table 1)."""
 
+import dataclasses
 import math
 from typing import ClassVar
 
@@ -12,6 +13,13 @@ from ..mechanics import WalkerModel
 
 def _zeros2(like):
     return jnp.zeros(2, dtype=jnp.result_type(like, float))
+
+
+#: Section points of the default walker's two gaits at 3 degrees (`reference_gait`).
+_REFERENCE_Z = {
+    "stable": (0.218668802939, -1.092383589884, -0.377373948907),
+    "unstable": (0.204675539342, -1.210571842398, -0.712488824701),
+}
 
 
 class CompassGait(WalkerModel):
@@ -46,6 +54,25 @@ class CompassGait(WalkerModel):
     min_strike_angle: float | jax.Array = 0.0
 
     n_dof: ClassVar[int] = 2
+    UNITS: ClassVar[dict] = {
+        "m1": "mass",
+        "m2": "mass",
+        "mH": "mass",
+        "a": "length",
+        "b": "length",
+        "g": "acceleration",
+    }
+
+    def reference_gait(self, family="stable"):
+        r"""The gaits of the default walker (thesis Table 1) at 3 degrees, $z = (q_1,
+        \dot q_1, \dot q_2)$ after impact: `"stable"` (7.4) and `"unstable"` (7.9). Seeds
+        for continuation (tests check the gaits found from them). The model is this one
+        with the Table 1 values (a subclass keeps its own further parameters)."""
+        z = _REFERENCE_Z.get(family)
+        if z is None:
+            raise ValueError(f"family must be 'stable' or 'unstable', got {family!r}")
+        table1 = dict(m1=5.0, m2=5.0, mH=10.0, a=0.5, b=0.5, g=9.81, psi=math.radians(3.0))
+        return dataclasses.replace(self, min_strike_angle=0.0, **table1), jnp.asarray(z)
 
     @property
     def l(self):
@@ -193,16 +220,22 @@ class CompassGait(WalkerModel):
         return jnp.stack([q2, q1, dq_plus[1], dq_plus[0]])
 
     def validate(self):
-        """Boolean: all parameters finite, masses and lengths positive, slope in (0, 30) deg
-        (and the checks of `WalkerModel.validate` for the fields subclasses add)."""
-        leaves = jnp.stack(
-            [jnp.asarray(v, float) for v in (self.m1, self.m2, self.mH, self.a, self.b, self.g)]
+        """Boolean: all parameters finite, masses, gravity and the hip-to-mass distance `a`
+        positive, `b` non-negative (`b = 0`: the leg masses at the feet), slope in
+        (0, 30) deg (and the checks of `WalkerModel.validate` for the fields subclasses
+        add). `a = 0` is invalid: the leg masses would sit at the hip, where the swing leg
+        has no inertia and its motion is undetermined."""
+        positive = jnp.stack(
+            [jnp.asarray(v, float) for v in (self.m1, self.m2, self.mH, self.a, self.g)]
         )
+        b = jnp.asarray(self.b, float)
         psi = jnp.asarray(self.psi, float)
         return (
             super().validate()
-            & jnp.all(jnp.isfinite(leaves))
-            & jnp.all(leaves > 0)
+            & jnp.all(jnp.isfinite(positive))
+            & jnp.all(positive > 0)
+            & jnp.isfinite(b)
+            & (b >= 0)
             & jnp.isfinite(psi)
             & (psi > 0)
             & (psi < math.radians(30.0))

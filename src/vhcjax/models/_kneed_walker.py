@@ -28,6 +28,8 @@ from ..hybrid import (
 )
 
 _KNEE = np.array([[0.0, 1.0, -1.0]])  # A q = q2 - q3 = 0: knee locked
+#: Section point of the default walker's gait (`reference_gait`).
+_REFERENCE_Z = (0.188185460239, -1.109587331253, -0.057148106788)
 #: Knee flexion below which a state entering the unlocked domain is hyperextended (rad).
 _KNEE_TOL = 1e-9
 
@@ -64,6 +66,23 @@ class KneedWalker(MultiDomainModel):
     num_domains: ClassVar[int] = 2
     POSITIVE_FIELDS: ClassVar[tuple] = ("ms", "mt", "mh", "a1", "b1", "a2", "b2", "g")
     NONNEGATIVE_FIELDS: ClassVar[tuple] = ("psi",)
+    UNITS: ClassVar[dict] = {
+        "ms": "mass",
+        "mt": "mass",
+        "mh": "mass",
+        "a1": "length",
+        "b1": "length",
+        "a2": "length",
+        "b2": "length",
+        "g": "acceleration",
+    }
+
+    def reference_gait(self, family="stable"):
+        r"""The default walker's gait at its default slope (0.0504 rad), $z = (q_1, \dot q_1,
+        \dot q_2)$ after heel strike; it has one family (`"stable"`)."""
+        if family != "stable":
+            raise ValueError(f"KneedWalker has one gait family, 'stable'; got {family!r}")
+        return KneedWalker(), jnp.asarray(_REFERENCE_Z)
 
     @property
     def ls(self):

@@ -15,6 +15,9 @@ import jax.numpy as jnp
 from .. import trig
 from ._compass_gait import CompassGait
 
+#: Section point of the default walker's stable gait (`reference_gait`).
+_REFERENCE_Z = (0.216679352100, -0.033752463767, -1.093187725656, -0.377948486809, -0.491198861942)
+
 
 class PendulumWalker(CompassGait):
     """Compass gait (thesis Table 1 defaults) plus a hip pendulum.
@@ -34,6 +37,14 @@ class PendulumWalker(CompassGait):
     lp: float | jax.Array = 0.8
 
     POSITIVE_FIELDS: ClassVar[tuple] = ("mp", "lp")  # besides `CompassGait.validate`
+    UNITS: ClassVar[dict] = {**CompassGait.UNITS, "mp": "mass", "lp": "length"}
+
+    def reference_gait(self, family="stable"):
+        r"""The default walker's stable gait at 3 degrees, $z = (q_1, q_3, \dot q_1,
+        \dot q_2, \dot q_3)$ (it has one known family)."""
+        if family != "stable":
+            raise ValueError(f"PendulumWalker knows one gait family, 'stable'; got {family!r}")
+        return PendulumWalker(), jnp.asarray(_REFERENCE_Z)
 
     n_dof: ClassVar[int] = 3
 

@@ -17,8 +17,8 @@ import numpy as np
 
 from .._results import RESULTS
 from ..gait import find_gaits
-from ..models import CompassGait
-from ._flip import _det_and_radius_batch, _with_psi, flip_slopes
+from ..models import CompassGait  # the atlas is over the compass gait's mass and length ratios
+from ._flip import _det_and_radius_batch, flip_slopes
 
 
 def grid_model(
@@ -42,31 +42,13 @@ def grid_model(
     )
 
 
-#: The stable gait of thesis Table 1 at 3 degrees (section point), the homotopy's start.
-_REFERENCE_Z = (0.2186688, -1.09238359, -0.37737395)
-_LEAVES = ("m1", "m2", "mH", "a", "b", "g", "psi")
-
-
-def seed_gaits(model, num=10):
-    """Stable gaits (section points, `(B, 3)`, NaN where lost) of a batch of models, by
-    homotopy from thesis Table 1 at 3 degrees: every parameter interpolated
-    geometrically in `num` steps, each step one batched `find_gaits` (shooting) from
-    the last step's gaits."""
-    ref = CompassGait()
-    B = int(np.shape(model.mH)[0])
-    z = np.tile(np.asarray(_REFERENCE_Z), (B, 1))
-    alive = np.ones(B, bool)
-    for s in np.linspace(0.0, 1.0, num + 1)[1:]:
-        m = model
-        for name in _LEAVES:
-            p0 = float(getattr(ref, name))
-            p1 = jnp.broadcast_to(jnp.asarray(getattr(model, name), float), (B,))
-            m = eqx.tree_at(lambda mm: getattr(mm, name), m, p0 * (p1 / p0) ** s)
-        g = find_gaits(m, jnp.asarray(z), method="shooting")
-        good = np.asarray(g.result == RESULTS.successful)
-        alive &= good
-        z = np.where(good[:, None], np.asarray(g.z), z)
-    return np.where(alive[:, None], z, np.nan)
+def seed_gaits(model, method="auto"):
+    """Stable gaits (section points, `(B, 3)`, NaN where none was found) of a batch of
+    models: `find_gaits` without guesses (each member continued from the reference gait,
+    the VHC search and, with `method="auto"`, shooting where it fails)."""
+    g = find_gaits(model, None, "stable", method)
+    good = np.asarray(g.result == RESULTS.successful)
+    return np.where(good[:, None], np.asarray(g.z), np.nan)
 
 
 class Atlas(eqx.Module):
@@ -105,6 +87,7 @@ def atlas(
     psi_max=math.radians(12.0),
     step=math.radians(0.5),
     tol=1e-10,
+    method="auto",
 ):
     """The atlas of the stable compass gait over a grid of $\\mu$ and $\\beta$.
 
@@ -115,7 +98,8 @@ def atlas(
     - `mass_leg` (kg), `leg_length` (m), `gravity` (m/s^2): the scales (they do not
       change the slopes or the spectral radius).
     - `psi_start`, `psi_max`, `step`: the slope scan (rad); `tol`: of the flip slopes
-      (rad). The gaits at `psi_start` are continued from the default model's (`seed_gaits`).
+      (rad). The gaits at `psi_start` are continued from the default model's (`seed_gaits`,
+      by `find_gaits` with `method`).
 
     **Returns:** an `Atlas`.
     """
@@ -149,11 +133,7 @@ def atlas(
         psi=psi_start,
     )
     N = MU.size
-    # Seeds on the walker with the default scales (the homotopy from Table 1 changes mu and
-    # beta only), mapped to these scales: angles are unchanged, velocities scale with
-    # sqrt(g / l).
-    z0 = seed_gaits(grid_model(MU.ravel(), BETA.ravel(), psi=psi_start))
-    z0[:, 1:] *= math.sqrt((gravity / leg_length) / (9.81 / 1.0))
+    z0 = seed_gaits(model, method)
     ok = np.asarray(np.isfinite(z0).all(axis=1), dtype=bool)
     scan = flip_slopes(model, z0, psi_start, psi_max=psi_max, step=step, tol=tol)
     reason = [
@@ -170,7 +150,7 @@ def atlas(
             good = np.asarray(g.result == RESULTS.successful)
             alive &= good
             z = np.where(good[:, None], np.asarray(g.z), z)
-        _, r = _det_and_radius_batch(_with_psi(model, np.full(N, slope)), z)
+        _, r = _det_and_radius_batch(model.with_slope(np.full(N, slope)), z)
         rho = np.where(alive, np.asarray(r), np.nan)
     shape = MU.shape
     return Atlas(

@@ -28,7 +28,7 @@ import numpy as np
 
 from .._results import RESULTS, result_names
 from ..gait import find_gait
-from ..models import CompassGait
+from ..models import CompassGait  # design varies the compass gait's parameters (PARAMETERS)
 from ..stability import gait_spectrum
 from ._flip import flip_slope, flip_slopes
 
@@ -195,6 +195,7 @@ def design(
     learning_rate=0.05,
     gtol=1e-4,
     callback=None,
+    method="auto",
 ):
     """Optimise a compass-gait walker for `objective` over the parameters `vary`.
 
@@ -209,6 +210,9 @@ def design(
     - `bounds`: `{name: (lo, hi)}` for some of `vary` (others: `DEFAULT_BOUNDS`).
     - `steps`: iterations at most (accepted steps); `learning_rate`: Adam's, in the
       scaled coordinates.
+    - `method`: the search of the starting gait (`find_gait`, continued from the
+      reference gait; default `"auto"`); later gaits are searched by shooting from the
+      last one.
     - `gtol`: stop when the projected gradient (scaled coordinates, relative to the
       objective's scale at the start) is below it.
     - `callback`: called with each history entry (progress).
@@ -271,7 +275,7 @@ def design(
         raise ValueError(
             "design: the starting parameters lie outside the bounds: " + "; ".join(outside)
         )
-    g0 = find_gait(with_parameters(base, vary, x), method="shooting", throw=False)
+    g0 = find_gait(with_parameters(base, vary, x), "stable", method, throw=False)
     if g0.result != RESULTS.successful:
         raise ValueError(f"no stable gait at the starting parameters: {result_names(g0.result)}")
     guess = np.asarray(g0.z)

@@ -27,10 +27,6 @@ from ..solvers import detach
 from ..stability import gait_spectrum
 
 
-def _with_psi(model, psi):
-    return eqx.tree_at(lambda m: m.psi, model, jnp.asarray(psi, float))
-
-
 @stored_jit
 def _det_and_radius(model, zs):
     """$\\det(I + J)$ and the spectral radius at the section points `zs` (batched with the
@@ -108,7 +104,7 @@ def _evaluate(model, psi, zs, mask, solver="newton"):
     gaits = find_gaits(sub, jnp.asarray(zs[idx]), method="shooting", psi=psi[idx], solver=solver)
     ok = np.asarray(gaits.result == RESULTS.successful)
     z = np.asarray(gaits.z)
-    F, rho = _det_and_radius_batch(_with_psi(sub, psi[idx]), z)
+    F, rho = _det_and_radius_batch(sub.with_slope(psi[idx]), z)
     z_out[idx], ok_out[idx] = z, ok
     F_out[idx] = np.where(ok, np.asarray(F), np.nan)
     rho_out[idx] = np.where(ok, np.asarray(rho), np.nan)
@@ -260,7 +256,7 @@ def flip_slopes(
 
 def _flip_function(model, psi, z):
     """$F(\\psi, p) = \\det(I + J)$ at the gait found from `z` (differentiable)."""
-    m = _with_psi(model, psi)
+    m = model.with_slope(psi)
     g = find_gait(m, method="shooting", guess=z, throw=False)
     J = gait_spectrum(m, g).jacobian
     return jnp.linalg.det(jnp.eye(J.shape[0]) + J)

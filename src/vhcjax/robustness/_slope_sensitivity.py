@@ -23,10 +23,6 @@ from ..solvers import implicit_outputs, linearised
 from ._gait_check import require_gait
 
 
-def _with_psi(model, psi):
-    return eqx.tree_at(lambda m: m.psi, model, psi)
-
-
 def gait_outputs(model, z, config=DEFAULT_CONFIG):
     """$(P(z), T, L, v)$: next section point, step period (s), step length (m, foot to foot
     at heel strike) and mean speed $L/T$ (m/s, along the slope) of one step from `z`."""
@@ -85,7 +81,7 @@ def _implicit(model, z, config):
     values = _gait_outputs_jit(model, z, config)
 
     def along(psi):
-        m = _with_psi(model, psi)
+        m = model.with_slope(psi)
         zz, outs = implicit_outputs(_fixed_point_fn, z, m, values, True, static=(config,))
         return zz, outs, linearised(_step_jacobian, config)(zz, m)
 

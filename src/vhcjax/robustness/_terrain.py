@@ -20,7 +20,7 @@ import numpy as np
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, step_unchecked
-from ..models import CompassGait
+from ..models import CompassGait  # a floor step changes the compass gait's guard
 from ..stability import returns_to
 from ._bisection import bisect_threshold
 from ._recovery import recover
@@ -91,7 +91,7 @@ def max_floor_step(
     model,
     x_star,
     *,
-    h_max=0.05,
+    h_max=None,
     iterations=12,
     scan=50,
     num_steps=40,
@@ -100,8 +100,10 @@ def max_floor_step(
     progress=None,
 ):
     """Largest step down and step up (m) met on the gait after which the walker returns to
-    the gait within `num_steps`, by batched bisection on `[0, h_max]` after a scan of
-    `scan` heights (1 mm apart by default), so that the *first* failing height is found:
+    the gait within `num_steps`, by batched bisection on `[0, h_max]` (default 5 % of the
+    leg length, `scales()["length"]`, so that a scaled walker's thresholds scale with
+    it) after a scan of `scan` heights (1 mm apart for a 1 m leg), so that the *first*
+    failing height is found:
     the surviving heights need not form an interval (at 3 degrees a step down of 14.5-16
     mm falls while 16.5-19.5 mm is survived).
 
@@ -110,6 +112,8 @@ def max_floor_step(
     (`FELL`, or `UNDECIDED` where it had not come back within `num_steps`).
     """
     sign = jnp.array([-1.0, 1.0])
+    if h_max is None:
+        h_max = 0.05 * float(model.scales()["length"])
 
     def survives(mag):  # the recovery labels: CONVERGED (0) survives
         return terrain_recovery(model, x_star, sign * mag, num_steps, tol, config).label

@@ -30,7 +30,6 @@ from ._multipliers import (
     settle as settle,
     to_midswing as to_midswing,
     transverse_note as transverse_note,
-    with_slope as with_slope,
 )
 from ._spectrum import GaitSpectrum as GaitSpectrum, gait_spectrum as gait_spectrum
 from ._transverse import (

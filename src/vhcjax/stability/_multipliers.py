@@ -42,7 +42,7 @@ from ..hybrid import (
     step_map,
     step_unchecked,
 )
-from ..models import CompassGait
+from ..models import CompassGait  # the default model (thesis Table 1) where none is given
 from ._transverse import TransverseLinearization, transverse_linearization
 
 #: Stable and unstable period-1 gaits of the default compass gait at 3 degrees
@@ -51,11 +51,6 @@ SEEDS_3DEG = {
     "stable": (0.2186688, -1.09238359, -0.37737395),
     "unstable": (0.20467554, -1.21057184, -0.71248882),
 }
-
-
-def with_slope(model, psi):
-    """`model` with its slope replaced by `psi` (rad), as a JAX leaf (no recompiles)."""
-    return eqx.tree_at(lambda m: m.psi, model, jnp.asarray(psi, float))
 
 
 def _sort(ev):
@@ -226,7 +221,7 @@ def _gait_multipliers(model, z, config=DEFAULT_CONFIG, transverse=True):
 
 @stored_jit
 def _family_multipliers_padded(model, psis, zs, config, transverse):
-    return jax.vmap(lambda p, z: _gait_multipliers(with_slope(model, p), z, config, transverse))(
+    return jax.vmap(lambda p, z: _gait_multipliers(model.with_slope(p), z, config, transverse))(
         psis, zs
     )
 
@@ -293,7 +288,7 @@ def gait_multipliers(model, z, config=DEFAULT_CONFIG, *, transverse=True):
     _check_single_domain(model, transverse, "gait_multipliers")
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((model, z)))
     if hasattr(model, "psi"):  # an array leaf, also when set by hand (no compile per slope)
-        model = with_slope(model, model.psi)
+        model = model.with_slope(model.psi)
     out = _gait_multipliers_jit(model, jnp.asarray(z, float), config, transverse)
     return out if traced else jax.device_get(out)
 
@@ -414,7 +409,7 @@ def period1_family(
     family="stable",
     *,
     model=None,
-    method="vhc",
+    method="auto",
     coarse_step=math.radians(0.1),
     seed=None,
     seed_psi=None,
@@ -425,10 +420,9 @@ def period1_family(
     The slope sweep of the gait search (`vhcjax.sweep`): the gait at 3 degrees by homotopy
     from the reference model, a continuation over anchor slopes at most `coarse_step`
     apart, then one batched Newton solve at every slope, missed slopes retried from
-    their neighbours. `method="vhc"` (default) solves thesis Problem 1; where its
-    assumption fails (the phi'' ODE becomes singular along the step) those slopes are
-    solved again by shooting, the fixed point of the Poincare map (thesis Problem 2),
-    which `method="shooting"` uses throughout.
+    their neighbours. `method="auto"` (default) solves thesis Problem 1 and, at the
+    slopes where that fails for any reason, the fixed point of the Poincare map (thesis
+    Problem 2); `"vhc"` and `"shooting"` use one of them throughout.
 
     `seed`, `seed_psi` and `config` are accepted for old calls and ignored (a warning):
     the sweep needs no seed and solves every gait to 1e-12. A slope that is not finite
@@ -462,23 +456,19 @@ def period1_family(
     z = np.zeros((len(psis), 2 * model.n_dof - 1))
     periods = np.zeros(len(psis))
     codes = np.full(len(psis), int(RESULTS.bad_input._value), dtype=np.int32)
-    for m in (method, "shooting") if method == "vhc" else (method,):
-        # the VHC search first; the slopes where its phi'' ODE is singular by shooting
-        todo = valid if m == method else codes == int(RESULTS.singular_phi_ode._value)
-        if not todo.any():
-            continue
-        g = sweep(model, psis[todo], family, m, anchor_step=coarse_step, tangents=False).gaits
-        z[todo] = np.asarray(g.z)
-        periods[todo] = np.asarray(g.T)
-        codes[todo] = np.asarray(g.result._value)
+    if valid.any():  # `"auto"`: the VHC search, shooting where it fails
+        g = sweep(model, psis[valid], family, method, anchor_step=coarse_step, tangents=False)
+        z[valid] = np.asarray(g.gaits.z)
+        periods[valid] = np.asarray(g.gaits.T)
+        codes[valid] = np.asarray(g.gaits.result._value)
     result = eqx.tree_at(lambda r: r._value, RESULTS.successful, jnp.asarray(codes))
     return Family(jnp.asarray(psis), jnp.asarray(z), jnp.asarray(periods), result)
 
 
 # ---- period doubling --------------------------------------------------------------------
 def _flip_function(model, psi, z0, config, k=1):
-    fp = _fixed_point_jit(with_slope(model, psi), jnp.asarray(z0), k, config=config)
-    J = _jacobian_jit(with_slope(model, psi), fp.z, k, config)
+    fp = _fixed_point_jit(model.with_slope(psi), jnp.asarray(z0), k, config=config)
+    J = _jacobian_jit(model.with_slope(psi), fp.z, k, config)
     return float(jnp.linalg.det(jnp.eye(J.shape[0]) + J)), np.asarray(fp.z), fp.result
 
 
@@ -544,7 +534,7 @@ def period_doubling_slope(
         it += 1
     psi = 0.5 * (a + b)
     _, z, _ = _flip_function(model, psi, za, config, k)
-    J = _jacobian_jit(with_slope(model, psi), jnp.asarray(z), k, config)
+    J = _jacobian_jit(model.with_slope(psi), jnp.asarray(z), k, config)
     ev = np.asarray(_sort(jnp.linalg.eigvals(J)))
     return PeriodDoubling(psi, z, ev, (a, b), it)
 
@@ -673,7 +663,7 @@ class BifurcationDiagram(eqx.Module):
 @stored_jit
 def _long_runs(model, psis, x0s, num_steps, num_record, config):
     def one(p, x0):
-        sim = simulate(with_slope(model, p), x0, num_steps, config=config)
+        sim = simulate(model.with_slope(p), x0, num_steps, config=config)
         return sim.steps.period[-num_record:], sim.result
 
     return jax.vmap(one)(psis, x0s)
@@ -716,10 +706,7 @@ def bifurcation_diagram(
             f"got {num_transient}, {num_record}"
         )
     x0s = np.stack(
-        [
-            np.asarray(with_slope(model, p).section_to_state(jnp.asarray(z)))
-            for p, z in zip(psis, zs)
-        ]
+        [np.asarray(model.with_slope(p).section_to_state(jnp.asarray(z))) for p, z in zip(psis, zs)]
     )
     x0s[:, -1] += perturbation
     steps = num_transient + num_record
@@ -780,14 +767,14 @@ def period2_branch(model, pd, psis, config=DEFAULT_CONFIG, amplitudes=(3e-3, 1e-
     psis = np.asarray(psis, float)
     if len(psis) == 0:
         return None
-    J = _jacobian_jit(with_slope(model, pd.psi), jnp.asarray(pd.z), 1, config)
+    J = _jacobian_jit(model.with_slope(pd.psi), jnp.asarray(pd.z), 1, config)
     ev, V = np.linalg.eig(np.asarray(J))
     v = np.real(V[:, np.argmin(np.abs(ev + 1))])
     v = v / np.linalg.norm(v)
     out_psi, out_z, out_T, out_mx = [], [], [], []
     zs = []
     for i, p in enumerate(psis):
-        m = with_slope(model, p)
+        m = model.with_slope(p)
         if i == 0:
             trials = [pd.z + s * v for s in amplitudes]
         else:
