@@ -55,6 +55,8 @@ def _numeric_actions():
 def _bad_values(action):
     """NaN, infinities, and the values just outside the flag's range."""
     flag = action.option_strings[0]
+    if flag == "--b":  # 0 is valid: the leg masses at the feet
+        return ["nan", "inf", "-inf", "-1"]
     if flag in MODEL_FLAGS:
         return ["nan", "inf", "-inf", "-1", "0"]
     kind, lo, hi, lo_open, hi_open = action.type.bounds
@@ -376,13 +378,13 @@ def test_no_gait_is_a_failed_computation_not_bad_input(capsys):
     # valid flags, but no gait from a seed whose walker falls: exit 1, one line
     assert main(["contraction", "--gait", "0.6", "-0.5", "0", "--quiet"]) == 1
     err = capsys.readouterr().err.strip()
-    assert "no gait found from --gait" in err and "(fell)" in err
+    assert "gait found from --gait" in err and "(fell:" in err
     assert "\n" not in err and "error" not in err
 
 
 def test_where_the_vhc_search_does_not_apply_shooting_finds_the_gait(capsys):
     """With a light hip (0.5 kg) the stance angle is not monotone over the step, so the
-    VHC search's phi'' ODE is singular (`singular_phi_ode`): `gait` without `--method`
+    VHC search's phi'' ODE is singular (`singular_phi_ode`): `gait` (`--method auto`)
     says so and finds the gait by shooting (stable, largest multiplier 0.398, which the
     transverse linearization cannot confirm: `phase_not_monotone`, its multipliers and
     their disagreement are null); `--method vhc` fails with a hint; the robustness
@@ -390,13 +392,13 @@ def test_where_the_vhc_search_does_not_apply_shooting_finds_the_gait(capsys):
     assert main(["gait", "--mass-hip", "0.5", "--json", "--quiet"]) == 0
     captured = capsys.readouterr()
     rec = json.loads(captured.out)
-    assert rec["method"] == "shooting" and "does not apply" in rec["method_reason"]
-    assert "does not apply" in captured.err
+    assert rec["method"] == "shooting" and "found by shooting" in rec["method_reason"]
+    assert "did not find this gait" in captured.err
     assert rec["stable"] is True and abs(rec["max_abs_multiplier"] - 0.3984) < 1e-3
     assert rec["multipliers"] is None and rec["transverse_disagreement"] is None
     assert main(["gait", "--mass-hip", "0.5", "--method", "vhc", "--quiet"]) == 1
-    out = capsys.readouterr().out
-    assert "singular_phi_ode" in out and "try --method shooting" in out
+    err = capsys.readouterr().err
+    assert "singular_phi_ode" in err and "try --method auto" in err
     argv = ["contraction", "--mass-hip", "0.5", "--perturbations", "4", "--steps", "8"]
     assert main(argv + ["--json", "--quiet"]) == 0
     c = json.loads(capsys.readouterr().out)
@@ -406,14 +408,15 @@ def test_where_the_vhc_search_does_not_apply_shooting_finds_the_gait(capsys):
 
 def test_a_sweep_that_finds_nothing_says_why():
     """`vhcjax sweep` with no gait at any slope has no end to report: its summary says
-    which codes it met, how often, and names the other method."""
+    which codes it met, how often, and, after one method alone, points to `auto`."""
     from vhcjax.cli._gait import _none_found
 
     rows = [{"result": "singular_phi_ode"}] * 3 + [{"result": "not_converged"}]
     reason = _none_found(rows, "vhc")
     assert reason.startswith("no gait found: singular_phi_ode at 3 slopes, not_converged at 1")
-    assert "phi'' ODE is singular" in reason and reason.endswith("try --method shooting")
-    assert _none_found([{"result": "fell"}], "shooting").endswith("try --method vhc")
+    assert "phi'' ODE is singular" in reason and reason.endswith("try --method auto")
+    assert _none_found([{"result": "fell"}], "shooting").endswith("try --method auto")
+    assert not _none_found([{"result": "fell"}], "auto").endswith("auto")
 
 
 def test_robustness_commands_analyse_the_gait_that_gait_finds(capsys):

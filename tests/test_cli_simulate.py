@@ -62,7 +62,8 @@ def test_a_fall_is_reported_not_an_error(capsys):
 BAD = [
     (["--mass-hip", "0"], "--mass-hip must be positive"),
     (["--mass-leg", "-1"], "--mass-leg must be positive"),
-    (["--a", "0"], "--a must be positive"),
+    (["--a", "0"], "the swing leg then has no inertia"),
+    (["--a", "-1"], "--a must be positive"),
     (["--b", "-0.5"], "--b must be positive"),
     (["--gravity", "0"], "--gravity must be positive"),
     (["--slope-deg", "0"], "--slope-deg must be in (0, 30)"),

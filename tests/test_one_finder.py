@@ -54,7 +54,7 @@ def test_auto_falls_back_to_shooting_whatever_the_vhc_failure(monkeypatch, code)
     m = vj.CompassGait()
     auto = vj.find_gait(m, "stable", guess=(0.2, -1.1))
     shot = vj.find_gait(m, "stable", "shooting", guess=(0.2, -1.1))
-    assert auto.found_by == "shooting" and auto.method == "shooting"
+    assert auto.found_by == "shooting" and auto.method == "auto"
     np.testing.assert_array_equal(np.asarray(auto.x_plus), np.asarray(shot.x_plus))
 
 

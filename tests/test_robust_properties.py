@@ -160,8 +160,9 @@ def test_find_gaits_nonfinite_guesses_bad_input_no_nan(capsys):
 
     capsys.readouterr()
     assert main(["gait", "--slope-deg", "3", "--guess", "0.5", "2.0"]) == 1
-    out = capsys.readouterr().out
-    assert "no gait:" in out and "T =" not in out and "speed" not in out
+    captured = capsys.readouterr()
+    assert "no stable gait found from --guess" in captured.err
+    assert "T =" not in captured.out and "speed" not in captured.out
 
 
 def test_model_repr_shows_values():

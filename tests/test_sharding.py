@@ -81,7 +81,8 @@ SCRIPT = textwrap.dedent(
 
     # batched gait search split over 4 devices (3 slopes padded to 8): each gait is a
     # fixed point of the hybrid simulation (an independent computation)
-    g = vj.find_gaits(m, jnp.array([[0.2, -1.1, -0.4]] * 3), psi=psis, method="shooting")
+    seeds = jnp.array([[0.21, -1.06, -0.45], [0.22, -1.09, -0.38], [0.22, -1.12, -0.3]])
+    g = vj.find_gaits(m, seeds, psi=psis, method="shooting")
     assert np.all(np.asarray(g.result._value) == vj.RESULTS.successful._value)
     x_star = jnp.stack([g.a, -g.a - 2 * jnp.asarray(psis), g.b, g.f], axis=1)
     ret = [vj.simulate_batch(vj.CompassGait(psi=p), x_star[i:i + 1], 1).steps.x_plus[0, 0]

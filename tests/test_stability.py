@@ -212,8 +212,9 @@ def test_cli_bifurcation_json_and_files(tmp_path, capsys):
 def test_cli_bifurcation_simulates_only_where_there_is_a_gait(tmp_path, capsys, monkeypatch):
     """A slope without a period-1 gait (a stand-in: the search's result replaced by
     `not_converged` at 3 degrees) is not simulated: its CSV row gives the search's result
-    and no pattern, a warning names it, and it counts neither as a fall nor in the
-    diagram."""
+    and no pattern, it counts neither as a fall nor in the diagram, the JSON names it
+    and says why the period doublings may be incomplete, and the command exits 1 with
+    one line saying so (an incomplete answer)."""
     import equinox as eqx
 
     from vhcjax.cli import main
@@ -229,11 +230,14 @@ def test_cli_bifurcation_simulates_only_where_there_is_a_gait(tmp_path, capsys, 
     monkeypatch.setattr(vhcjax.stability, "period1_family", missing_at_3)
     csv = tmp_path / "b.csv"
     argv = ["bifurcation", "--slope-deg", "2.75:3.0:0.05", "--transient", "40", "--record", "8"]
-    assert main(argv + ["--json", "--csv", str(csv)]) == 0
+    assert main(argv + ["--json", "--csv", str(csv)]) == 1
     captured = capsys.readouterr()
     out = json.loads(captured.out)
     assert out["num_no_gait"] == 1 and out["num_fell"] == 0 and out["num_slopes"] == 6
-    assert "no period-1 gait found at 1 of 6 slopes (3 deg)" in captured.err
+    assert out["no_gait_slopes_deg"] == [3.0]
+    assert "3 deg" in out["period_doubling_slopes_deg_reason"]
+    err = captured.err.strip().splitlines()
+    assert len(err) == 1 and "incomplete: no period-1 gait found at 1 of 6 slopes (3 deg" in err[0]
     rows = csv.read_text().splitlines()
     assert rows[6] == "3,not_converged," + "," * 8
     assert rows[5].split(",")[1:3] == ["successful", "1"]
@@ -279,7 +283,7 @@ def test_period1_family_is_the_poincare_fixed_point_at_every_slope(gaits3):
             np.testing.assert_allclose(np.asarray(fp.z), z, atol=1e-10)
             assert abs(float(fp.periods[0]) - T) < 1e-10
     light = CompassGait(mH=1.0)
-    vhc = vhcjax.sweep(light, np.radians([3.5, 4.5]), "stable", tangents=False)
+    vhc = vhcjax.sweep(light, np.radians([3.5, 4.5]), "stable", "vhc", tangents=False)
     assert vhcjax.result_names(vhc.gaits.result) == ["successful", "singular_phi_ode"]
     fam = vhcjax.period1_family(np.radians([3.5, 4.5]), "stable", model=light)
     assert vhcjax.result_names(fam.result) == ["successful"] * 2

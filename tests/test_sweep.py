@@ -293,13 +293,13 @@ def test_a_guess_without_a_real_root_starts_at_the_vertex():
     P = np.asarray(_impact_data(model, jnp.asarray(a)).P)
     np.testing.assert_allclose(float(ah[1]), (-2.0 - P[0, 0] * float(vertex)) / P[0, 1], rtol=1e-12)
     three = jnp.full(3, math.radians(3.0))
-    far = vj.find_gaits(model, jnp.tile(jnp.array([a, -2.0]), (3, 1)), psi=three)
-    near = vj.find_gaits(model, jnp.tile(jnp.array([0.2, -1.0]), (3, 1)), psi=three)
+    far = vj.find_gaits(model, jnp.tile(jnp.array([a, -2.0]), (3, 1)), method="vhc", psi=three)
+    near = vj.find_gaits(model, jnp.tile(jnp.array([0.2, -1.0]), (3, 1)), method="vhc", psi=three)
     assert vj.result_names(far.result) == ["successful"] * 3
     np.testing.assert_allclose(np.asarray(far.x_plus), np.asarray(near.x_plus), atol=1e-10)
     # a guess walking uphill lands on the stable gait with its velocities reversed: the
     # uphill (negative-time) solution, coded so although its d is the other root
-    up = vj.find_gaits(model, jnp.tile(jnp.array([0.145, 0.7]), (3, 1)), psi=three)
+    up = vj.find_gaits(model, jnp.tile(jnp.array([0.145, 0.7]), (3, 1)), method="vhc", psi=three)
     assert vj.result_names(up.result) == ["infeasible_uphill"] * 3
     np.testing.assert_allclose(float(up.b[0]), -float(near.b[0]), rtol=1e-9)
     np.testing.assert_allclose(float(up.T[0]), -float(near.T[0]), rtol=1e-9)

@@ -111,7 +111,7 @@ def run_multipliers(args):
     check_method(args, model)
     check_figure_file(args.png, "--png")
     # continued from the model's reference gait to this model (any parameters)
-    gait, why = find_walker_gait(args, model, args.family)
+    gait, why = find_walker_gait(args, model, args.family or "stable")
     z = model.state_to_section(gait.x_plus)
     compass = vhc_applies(model)  # the transverse linearization is the compass gait's
     gm = S.gait_multipliers_jit(model, z, transverse=compass)

@@ -56,7 +56,8 @@ def _common(p, png_help):
 def _gait(args):
     """The gait the command analyses, or a one-line error: the stable gait, found as
     `vhcjax gait` finds it (`vhcjax.find_gait` with `--method`: continued from the
-    model's reference gait to this model and slope, or searched from `--gait`), then
+    model's reference gait to this model and slope), or the gait of either family
+    searched from `--gait`, then
     made a fixed point of the step map the simulations use by Newton shooting from
     there (it moves the gait by the integration tolerance). Newton from one fixed seed
     would land on whichever gait is nearest: at 0.5 degrees an unstable one, with a
@@ -64,10 +65,17 @@ def _gait(args):
     import numpy as np
 
     from .._results import result_names
+    from ..gait import vhc_applies
     from ..hybrid import fixed_point_jit
 
     model = walker_from_args(args)
-    gait, _ = find_walker_gait(args, model, "stable", args.gait, "--gait")
+    try:
+        gait, _ = find_walker_gait(args, model, "stable", args.gait, "--gait")
+    except ComputationFailed:
+        if args.gait is None or not vhc_applies(model):
+            raise
+        # a seed may name a gait of either family (the unstable one, say)
+        gait, _ = find_walker_gait(args, model, "unstable", args.gait, "--gait")
     z = model.state_to_section(gait.x_plus)
     fp = fixed_point_jit(model, z)
     if result_names(fp.result) != "successful":

@@ -240,4 +240,13 @@ def continue_to_model(model, family="stable", method="vhc", num=None):
     return _gait_in_units_jit(gait, model)
 
 
-_gait_in_units_jit = eqx.filter_jit(gait_in_units)
+@eqx.filter_jit
+def _gait_in_units_jit(gait, model):
+    """`gait_in_units`; a failed gait's placeholders stay finite (a period of 0 would
+    make its speed NaN)."""
+    out = gait_in_units(gait, model)
+    bad = out.result != RESULTS.successful
+    return jax.tree_util.tree_map(
+        lambda x: jnp.where(bad & ~jnp.isfinite(x), 0.0, x) if eqx.is_inexact_array(x) else x,
+        out,
+    )

@@ -97,13 +97,13 @@ def find_gait(model, family="stable", method="auto", guess=None, *, solver="newt
         gait = _compass_gait(model, family, methods[0], guess, solver)
         for m in methods[1:]:
             code = gait.result._value
-            if not isinstance(code, jax.core.Tracer) and code == RESULTS.successful._value:
+            done = (RESULTS.successful._value, RESULTS.bad_input._value)  # nothing to retry
+            if not isinstance(code, jax.core.Tracer) and code in done:
                 break
             gait = _prefer(gait, _compass_gait(model, family, m, guess, solver))
-        if not isinstance(gait.shooting, jax.core.Tracer):
-            gait = _prefer_labels(gait)  # the method that found it
     else:
         gait = _shooting_gait_of(model, family, guess)
+    gait = dataclasses.replace(gait, method=method)  # the label of the call, not the data
     gait = _clean_failed(gait, guess)
     gait = with_derivatives(params, gait, _derivative_method(gait), family_sign(family))
     if throw:
@@ -115,7 +115,10 @@ def find_gait(model, family="stable", method="auto", guess=None, *, solver="newt
 def _derivative_method(gait):
     """The residual whose implicit derivatives are attached: Problem 1's where every
     member was found by the VHC search, else Problem 2's (both vanish at the gait)."""
-    return "vhc" if gait.method == "vhc" else "shooting"
+    if gait.method != "auto":
+        return gait.method
+    by = gait.shooting
+    return "vhc" if not isinstance(by, jax.core.Tracer) and not np.any(by) else "shooting"
 
 
 def _prefer(first, second):
@@ -358,7 +361,7 @@ def find_gaits(
     if vhc_applies(model):
         gaits = _find_in_units(model, guesses, family, method, solver, mesh, chord, far)
     else:
-        gaits = _shooting_gaits_of(model, guesses, family)
+        gaits = _shooting_gaits_of(model, guesses, family, method)
     return with_derivatives(params, gaits, _derivative_method(gaits), family_sign(family))
 
 
@@ -420,7 +423,10 @@ def _find_in_units(model, guesses, family, method, solver, mesh, chord, far):
             redo = _find_gaits(own, guesses, family, "shooting", solver, mesh, chord, far)
             gaits = _prefer(gaits, redo)
         else:
-            idx = np.flatnonzero(np.asarray(code) != RESULTS.successful._value)
+            code = np.asarray(code)  # bad input is no failure of the VHC search
+            idx = np.flatnonzero(
+                (code != RESULTS.successful._value) & (code != RESULTS.bad_input._value)
+            )
             if idx.size:
                 sub = _members(own, B, idx)  # a shared model stays shared
                 g = None if guesses is None else guesses[idx]
@@ -434,32 +440,23 @@ def _find_in_units(model, guesses, family, method, solver, mesh, chord, far):
                     gaits,
                     again,
                 )
-                gaits = _prefer_labels(gaits)
-    return _gaits_in_units(gaits, model)
+    gaits = dataclasses.replace(gaits, method=method)  # the label of the call
+    return _clean_failed(_gaits_in_units(gaits, model), None, B)
 
 
-def _prefer_labels(gaits):
-    """A batch all found by one method is labelled with it."""
-    by = np.asarray(gaits.shooting)
-    if by.all():
-        return dataclasses.replace(gaits, method="shooting")
-    if not by.any():
-        return dataclasses.replace(gaits, method="vhc")
-    return gaits
-
-
-def _shooting_gaits_of(model, guesses, family):
+def _shooting_gaits_of(model, guesses, family, method):
     """A batch of a model without a VHC search: `vmap` of the shooting search from
     `guesses`, or `find_gait` (continuation) member by member."""
     B = _batch_size(model, guesses)
     if guesses is None:
         gaits = [
-            find_gait(_members(model, B, i), family, "shooting", throw=False) for i in range(B)
+            find_gait(_members(model, B, i), family, method, throw=False) for i in range(B)
         ]
         return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *gaits)
     model = _members(model, B)
     check_section_shape(model, guesses[0], "guesses[i]")
-    return _shooting_batch(model, guesses, family, _batched_axes(model))
+    gaits = _shooting_batch(model, guesses, family, _batched_axes(model))
+    return dataclasses.replace(gaits, method=method)
 
 
 @eqx.filter_jit

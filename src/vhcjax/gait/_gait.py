@@ -55,8 +55,9 @@ class Gait(eqx.Module):
     - `shooting`: boolean, found by shooting (Problem 2) rather than by the VHC search
       (per member in a batch; `found_by` names it).
     - `result`: a `RESULTS` code.
-    - `family`: static label; `method`: static, the method that found every member
-      (`"vhc"` or `"shooting"`), or `"auto"` for a batch found by both.
+    - `family`, `method`: static labels, the family and method asked for (`"auto"`,
+      `"vhc"`, `"shooting"`): two calls with the same arguments give pytrees of one
+      structure; `found_by` says which method found each gait.
     """
 
     a: jax.Array

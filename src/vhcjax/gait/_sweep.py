@@ -261,7 +261,7 @@ def sweep(model, slopes, family="stable", method="auto", *, anchor_step=ANCHOR_S
             if tangent is not None and t2 is not None:
                 tangent = tangent.at[miss].set(t2[:, :2])  # (da/dpsi, db/dpsi)
             edge_tangent = edge_tangent.at[miss].set(e2)
-            gaits = _label_by_method(gaits)
+    gaits = dataclasses.replace(gaits, method=method)  # the label of the call
     # back to the model's units: velocities and their tangents over the time unit
     ts = float(model.scales()["time"])
     gaits = _gaits_in_units(gaits, model.with_slope(jnp.asarray(psi)))
@@ -283,15 +283,6 @@ def _put_members(gaits, idx, values):
         return jnp.asarray(a)
 
     return jax.tree_util.tree_map(put, gaits, values)
-
-
-def _label_by_method(gaits):
-    import numpy as np
-
-    by = np.asarray(gaits.shooting)
-    if by.all() or not by.any():
-        return dataclasses.replace(gaits, method="shooting" if by.all() else "vhc")
-    return gaits
 
 
 def _sweep(model, psi, family, method, anchor_step, tangents):
