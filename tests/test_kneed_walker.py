@@ -262,13 +262,13 @@ def test_cli_gait_and_multipliers(capsys, kw, gait):
     np.testing.assert_allclose(m["max_abs_multiplier"], ev[-1], atol=1e-10)
 
     # a model where the family is lost: the record has the compass gait's nulls, and says
-    # where the continuation stopped
+    # why
     argv = ["gait", "--model", "kneed", "--mass-shank", "5", "--json"]
     assert main(argv) == 1
     rec = json.loads(capsys.readouterr().out)
     assert rec["result"] == "fell" and rec["x0"] is None and rec["residual"] is None
     assert rec["params"] is None
-    assert "last found at ms 0.4" in rec["reason"] and "--guess" in rec["reason"]
+    assert "no gait found at slope" in rec["reason"] and "fell" in rec["reason"]
 
     for argv in (
         ["gait", "--model", "kneed", "--method", "vhc", "--slope-deg", "3"],

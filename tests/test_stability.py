@@ -289,7 +289,7 @@ def test_period1_family_is_the_poincare_fixed_point_at_every_slope(gaits3):
     assert vhcjax.result_names(fam.result) == ["successful"] * 2
     for p, z in zip(np.radians([3.5, 4.5]), np.asarray(fam.z)):
         out = vhcjax.step_map(light.with_slope(p), jnp.asarray(z))
-        assert float(jnp.max(jnp.abs(out.z_next - z))) < 1e-10
+        assert float(jnp.max(jnp.abs(out.z_next - z))) < vhcjax.gait.SUCCESS_TOL
     with pytest.raises(TypeError, match="compass-gait"):
         vhcjax.period1_family([PSI3], model=vhcjax.KneedWalker())
     # a slope that is not finite and positive is coded, the others solved; an old seed

