@@ -449,9 +449,7 @@ def _shooting_gaits_of(model, guesses, family, method):
     `guesses`, or `find_gait` (continuation) member by member."""
     B = _batch_size(model, guesses)
     if guesses is None:
-        gaits = [
-            find_gait(_members(model, B, i), family, method, throw=False) for i in range(B)
-        ]
+        gaits = [find_gait(_members(model, B, i), family, method, throw=False) for i in range(B)]
         return jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *gaits)
     model = _members(model, B)
     check_section_shape(model, guesses[0], "guesses[i]")
