@@ -512,15 +512,11 @@ def add_model_choice(parser):
     )
 
 
-def kneed_from_args(args, slope_deg):
-    """Build and validate a `KneedWalker` from the flags (unset flags: its defaults)."""
-    from .. import KneedWalker
-
+def _walker_from_flags(cls, flags, args, slope_deg):
+    """Build and validate a `cls` walker from `flags` (`(dest, flag, field)`; unset flags:
+    its defaults, every value given positive)."""
     values = {}
-    for dest, flag, field, _ in KNEED_FLAGS + (
-        ("mass_hip", "--mass-hip", "mh", ""),
-        ("gravity", "--gravity", "g", ""),
-    ):
+    for dest, flag, field in flags:
         v = getattr(args, dest, None)
         if v is None:
             continue
@@ -529,7 +525,16 @@ def kneed_from_args(args, slope_deg):
             raise CLIError(f"{flag} must be positive, got {v}")
         values[field] = v
     check_slope_deg(slope_deg)
-    return KneedWalker(psi=math.radians(slope_deg), **values)
+    return cls(psi=math.radians(slope_deg), **values)
+
+
+def kneed_from_args(args, slope_deg):
+    """Build and validate a `KneedWalker` from the flags (unset flags: its defaults)."""
+    from .. import KneedWalker
+
+    flags = [(dest, flag, field) for dest, flag, field, _ in KNEED_FLAGS]
+    flags += [("mass_hip", "--mass-hip", "mh"), ("gravity", "--gravity", "g")]
+    return _walker_from_flags(KneedWalker, flags, args, slope_deg)
 
 
 #: The compass gait's flags and their defaults (thesis Table 1). With `--model` they
@@ -543,21 +548,12 @@ def simplest_from_args(args, slope_deg):
     """Build and validate a `SimplestWalker` from the flags (unset flags: its defaults)."""
     from .. import SimplestWalker
 
-    values = {}
-    for dest, flag, field in (
+    flags = [
         ("mass_hip", "--mass-hip", "M"),
         ("gravity", "--gravity", "g"),
         ("leg_length", "--leg-length", "l"),
-    ):
-        v = getattr(args, dest, None)
-        if v is None:
-            continue
-        check_finite(flag, v)
-        if v <= 0:
-            raise CLIError(f"{flag} must be positive, got {v}")
-        values[field] = v
-    check_slope_deg(slope_deg)
-    return SimplestWalker(psi=math.radians(slope_deg), **values)
+    ]
+    return _walker_from_flags(SimplestWalker, flags, args, slope_deg)
 
 
 def walker_from_args(args, slope_deg=None):
