@@ -482,8 +482,8 @@ KNEED_FLAGS = (
 
 
 def add_model_choice(parser):
-    """`--model compass|kneed` and the kneed walker's own flags (`--mass-hip` and
-    `--gravity` apply to both; their defaults are each model's)."""
+    """`--model compass|kneed|simplest` and the other walkers' own flags (`--mass-hip` and
+    `--gravity` apply to all; their defaults are each model's)."""
     parser.add_argument(
         "--model",
         default="compass",
