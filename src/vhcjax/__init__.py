@@ -145,6 +145,7 @@ from .robustness import (
     max_push as max_push,
     pulse_past_strike as pulse_past_strike,
     pulse_step as pulse_step,
+    push_bound as push_bound,
     push_sensitivity_autodiff as push_sensitivity_autodiff,
     push_sensitivity_transverse as push_sensitivity_transverse,
     recover as recover,

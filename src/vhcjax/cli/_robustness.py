@@ -568,6 +568,7 @@ def run_push(args):
         UNDECIDED,
         max_push,
         pulse_past_strike,
+        push_bound,
         push_sensitivity_autodiff,
         push_sensitivity_transverse,
     )
@@ -604,7 +605,7 @@ def run_push(args):
         out["transverse_dzeta_dP"] = Z
         out["max_abs_difference_autodiff_vs_transverse"] = float(np.max(np.abs(zad - Z)))
     if args.max is None:
-        args.max = _in_walker_units(model, 20.0, "impulse" if args.duration == 0 else "force")
+        args.max = float(f"{push_bound(model, args.duration):.12g}")  # 20, not 20.000000000000004
     res = max_push(
         model,
         x_star,

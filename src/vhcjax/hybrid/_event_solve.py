@@ -57,9 +57,15 @@ def solve_to_event(
     atol,
     max_steps,
     norm=optx.rms_norm,
+    units=None,
 ):
     """Integrate `field(t, y, args)` from `(t0, y0)` until the first of `conds` fires, or
     `t1`. **Returns:** an `EventSolution`.
+
+    `units`: `None`, or `(time_unit, state_unit)` (`state_unit` a pytree like `y0`, or
+    arrays that broadcast against it): the solve then runs in $t/T$ and $y/Y$, so that
+    `rtol`, `atol` and the event tolerance are relative to the system's own scales and
+    a rescaled system takes the same steps. The answer is in the caller's units.
 
     `conds`: a tuple of functions `cond(t, y, args)`; a real-valued one is root-found (its
     sign change in `directions`: True up, False down, None either), a boolean one stops at
@@ -70,6 +76,22 @@ def solve_to_event(
     over. Never raises: read `result`.
     """
     y0 = jtu.tree_map(jnp.asarray, y0)
+    if units is not None:
+        return _solve_in_units(
+            field,
+            conds,
+            directions,
+            y0,
+            args,
+            t0,
+            t1,
+            units,
+            solver=solver,
+            rtol=rtol,
+            atol=atol,
+            max_steps=max_steps,
+            norm=norm,
+        )
     t = jnp.asarray(t0, jtu.tree_leaves(y0)[0].dtype)
     # Closed-over arrays (a model, push parameters) become explicit inputs, so that their
     # tangents reach the rule below instead of being lost in a closure.
@@ -89,6 +111,35 @@ def solve_to_event(
         max_steps=max_steps,
         norm=norm,
     )
+
+
+def _solve_in_units(field, conds, directions, y0, args, t0, t1, units, **kwargs):
+    """`solve_to_event` in the time unit `T` and state unit `Y`: the field
+    $T f(Ts, Yx) / Y$, the conditions $c(Ts, Yx)$."""
+    dtype = jtu.tree_leaves(y0)[0].dtype
+    tu = jnp.asarray(units[0], dtype)
+    yu = jtu.tree_map(lambda u, y: jnp.broadcast_to(jnp.asarray(u, dtype), y.shape), units[1], y0)
+    up = lambda x: jtu.tree_map(jnp.multiply, x, yu)  # noqa: E731
+    down = lambda x: jtu.tree_map(jnp.divide, x, yu)  # noqa: E731
+
+    def scaled_field(s, x, a):
+        return jtu.tree_map(lambda d, u: d * tu / u, field(s * tu, up(x), a), yu)
+
+    def scaled(cond):
+        return lambda s, x, a: cond(s * tu, up(x), a)
+
+    sol = solve_to_event(
+        scaled_field,
+        tuple(scaled(c) for c in conds),
+        directions,
+        down(y0),
+        args,
+        t0 / tu,
+        t1 / tu,
+        **kwargs,
+    )
+    ys = jtu.tree_map(lambda v, u: v * u, sol.ys, yu)
+    return EventSolution(sol.ts * tu, ys, sol.result, sol.event_mask)
 
 
 class _Jitted(eqx.Module):

@@ -84,6 +84,18 @@ def _event(model, gate=False):
     )
 
 
+def _units(model, latch=False):
+    """The swing's own units: time $T$ = `model.time_scale`, angles 1, velocities $1/T$
+    (and, with `latch`, the latch of `_latched`: $T L^3$, $L$ the walker's length unit),
+    so that the integration tolerances do not depend on the walker's size or gravity."""
+    t = jnp.asarray(model.time_scale, dtype=float)
+    n = model.n_dof
+    parts = [jnp.ones((n,)), jnp.ones((n,)) / t]
+    if latch:
+        parts.append((t * model.scales()["length"] ** 3)[None])
+    return t, jnp.concatenate(parts)
+
+
 def flow(
     model,
     x0,
@@ -119,6 +131,7 @@ def flow(
             rtol=config.rtol,
             atol=config.atol,
             max_steps=config.max_steps,
+            units=_units(model),
         )
     return diffrax.diffeqsolve(
         diffrax.ODETerm(vf),
@@ -217,6 +230,7 @@ def _swing(model, x0, t_max, alive, config, adjoint, vector_field):
             rtol=config.rtol,
             atol=config.atol,
             max_steps=config.max_steps,
+            units=_units(model, latch=True),
         )
     else:
         sol = diffrax.diffeqsolve(

@@ -18,6 +18,7 @@ import numpy as np
 
 from .._programs import stored_jit
 from .._results import result_names
+from ..gait import section_in_units
 from ..hybrid import DEFAULT_CONFIG, step_map
 from ._gait_check import check_returns
 from ._recovery import FELL, recover
@@ -35,7 +36,7 @@ class Contraction(eqx.Module):
       is NaN where none stayed, as near an unstable gait.
     - `measured_steps_10x`, `measured_steps_100x`: median over recoveries of the first step
       at which the error is below 1/10 (1/100) of the initial error (NaN where none is).
-    - `distance`: $\\|x_k - x^*\\|_\\infty$ per recovery and step, shape `(batch, steps+1)`.
+    - `distance`: $\\|x_k - x^*\\|_\\infty$ (own units, as `Recovery.distance`) per recovery and step, shape `(batch, steps+1)`.
     - `fit_window`: the steps `(k0, k1)` used in the fit.
     """
 
@@ -91,8 +92,8 @@ def contraction(
     - `model`: a `WalkerModel`.
     - `z_star`: section coordinates of a (stable) gait.
     - `num_perturbations`: number of simulated recoveries.
-    - `scale`: size ($\\infty$-norm) of the random initial perturbations (rad, rad/s),
-      small enough for the linearization to hold.
+    - `scale`: size ($\\infty$-norm) of the random initial perturbations in the walker's
+      own units (rad, and velocities times `model.time_scale`), small enough for the linearization to hold.
     - `num_steps`: steps simulated per recovery, more than `fit_window[0]`.
     - `fit_window`: steps `(k0, k1)` over which the decay rate is fitted (after the
       transient of the fast modes, before the solver's error floor); `k1` is clipped to
@@ -124,7 +125,12 @@ def contraction(
     rho = float(np.abs(ev[0]))
     dz = jax.random.uniform(key, (num_perturbations, z_star.shape[0]), minval=-1.0, maxval=1.0)
     dz = scale * dz / jnp.max(jnp.abs(dz), axis=1, keepdims=True)
-    x0 = jax.vmap(model.section_to_state)(z_star + dz)
+    # Perturbations in the walker's own units (velocities times the time scale), as the
+    # distances of `recover`: a rescaled walker gets the same perturbations.
+    ts = model.time_scale
+    z_own = section_in_units(model, z_star, ts)
+    z0 = jax.vmap(lambda d: section_in_units(model, z_own + d, 1.0 / ts))(dz)
+    x0 = jax.vmap(model.section_to_state)(z0)
     rec = _recover_jit(model, x0, model.section_to_state(z_star), num_steps, config)
     # A walker that fell, or whose error grew tenfold (it left the neighbourhood where the
     # linearization holds, e.g. for another gait), measures no decay rate.

@@ -22,6 +22,8 @@ independent ways that the tests compare:
    \\Phi(t_s)^{-1} L(t_s) B(t_s) P$.
 """
 
+import math
+
 import diffrax
 import equinox as eqx
 import jax
@@ -292,6 +294,19 @@ class PushThresholds(eqx.Module):
     duration: float
 
 
+def push_bound(model, duration=0.0):
+    """The default upper bound of `max_push`: 20 N s (an impulse, `duration = 0`) or
+    196.2 N (a pulse force) for the thesis's walker (20 kg, 1 m, 9.81 m/s^2), in the same
+    proportion to `model`'s own impulse unit $M\\sqrt{gL}$ or force unit $Mg$ (`scales`),
+    so that a rescaled walker is searched over the rescaled range."""
+    s = {k: float(v) for k, v in model.scales().items()}
+    if duration == 0:
+        return (
+            20.0 * s["mass"] * math.sqrt(s["acceleration"] * s["length"]) / (20 * math.sqrt(9.81))
+        )
+    return 20.0 * 9.81 * s["mass"] * s["acceleration"] / (20 * 9.81)
+
+
 def max_push(
     model,
     x_star,
@@ -299,7 +314,7 @@ def max_push(
     phases,
     angles,
     *,
-    p_max=20.0,
+    p_max=None,
     duration=0.0,
     iterations=14,
     scan=8,
@@ -309,14 +324,16 @@ def max_push(
     progress=None,
 ):
     """Largest impulse (or pulse force) at each phase and direction after which the walker
-    returns to the gait within `num_steps`, by batched bisection on `[0, p_max]`.
-    A `ValueError` where a pulse (`duration > 0`) would still act at the gait's heel
-    strike (`pulse_past_strike`).
+        returns to the gait within `num_steps`, by batched bisection on `[0, p_max]`
+    (default `push_bound(model, duration)`, in proportion to the walker's own units).
+        A `ValueError` where a pulse (`duration > 0`) would still act at the gait's heel
+        strike (`pulse_past_strike`).
 
-    **Returns:** `PushThresholds`.
+        **Returns:** `PushThresholds`.
     """
     phases = np.asarray(phases, dtype=float)
     angles = np.asarray(angles, dtype=float)
+    p_max = push_bound(model, duration) if p_max is None else p_max
     if phases.size == 0 or angles.size == 0:
         raise ValueError("max_push: give at least one phase and one angle")
     if not (np.isfinite(phases).all() and np.isfinite(angles).all()):

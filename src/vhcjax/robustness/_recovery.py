@@ -34,7 +34,8 @@ class Recovery(eqx.Module):
       step that failed (`fell`, `no_impact`, `bad_impact`, ...), `other_cycle` or
       `undecided`.
     - `x_final`: last post-impact state.
-    - `distance`: $\\|x_k - x^*\\|_\\infty$ after every step (shape `(batch, num_steps+1)`,
+    - `distance`: $\\|x_k - x^*\\|_\\infty$ in the walker's own units (angles in rad,
+      velocities times `model.time_scale`) after every step (shape `(batch, num_steps+1)`,
       entry 0 is the initial state; entries after the member stopped repeat its last value).
     - `step_times`: duration of every step (0 after the member stopped).
     """
@@ -69,7 +70,9 @@ def recover(
     - `x0`: post-impact states, shape `(batch, 2n)`.
     - `x_star`: post-impact state of the gait (a fixed point of the step map).
     - `num_steps`: largest number of steps simulated (static).
-    - `tol`: converged when $\\|x_k - x^*\\|_\\infty <$ `tol` (rad, rad/s).
+    - `tol`: converged when $\\|x_k - x^*\\|_\\infty <$ `tol`, in the walker's own units
+      (angles in rad, velocities times `model.time_scale`), so that a walker and its
+      rescaled copy converge on the same step.
     - `cycle_tol`: a survivor with $\\|x_N - x_{N-p}\\|_\\infty <$ `cycle_tol` for some
       `p <= max_period` is labelled `OTHER_CYCLE` with period `p`.
     - `config`: `SolverConfig` of the swing integration (default `FAST_CONFIG`,
@@ -97,7 +100,13 @@ def recover(
         )
     B = x0.shape[0]
     H = max_period + 1
-    dist0 = jnp.max(jnp.abs(x0 - x_star), axis=-1)
+    n = x_star.shape[-1] // 2
+    weight = jnp.concatenate([jnp.ones(n), jnp.full(n, model.time_scale)])  # own units
+
+    def norm(dx):
+        return jnp.max(jnp.abs(dx * weight), axis=-1)
+
+    dist0 = norm(x0 - x_star)
     conv0 = (dist0 < tol) & (first_step is None)
 
     def batched_step(mdl, x, alive):
@@ -108,7 +117,7 @@ def recover(
         ok = sr.result._value == RESULTS.successful._value
         fail = alive & ~ok
         x_new = jnp.where((alive & ok)[:, None], sr.x_plus, x)
-        d = jnp.max(jnp.abs(x_new - x_star), axis=-1)
+        d = norm(x_new - x_star)
         newly_conv = alive & ok & (d < tol) & (label < 0)
         label = jnp.where(fail, FELL, jnp.where(newly_conv, CONVERGED, label))
         steps = jnp.where(newly_conv | fail, k + 1, steps)
@@ -148,9 +157,7 @@ def recover(
 
     # Survivors that never came within tol: another cycle of period p, or undecided.
     undecided = label < 0
-    gaps = jnp.stack(
-        [jnp.max(jnp.abs(x - hist[:, (k - p) % H]), axis=-1) for p in range(1, H)], axis=1
-    )
+    gaps = jnp.stack([norm(x - hist[:, (k - p) % H]) for p in range(1, H)], axis=1)
     is_cycle = gaps < cycle_tol
     period = jnp.where(jnp.any(is_cycle, axis=1), jnp.argmax(is_cycle, axis=1) + 1, 0)
     other = undecided & (period > 0) & (k >= H)
