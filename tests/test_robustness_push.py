@@ -99,7 +99,7 @@ def test_cli_says_when_the_step_budget_decides_the_largest_push(capsys):
     out = json.loads(capsys.readouterr().out)
     # 3 steps are too few to come back within 1e-4 of the gait after any real push: every
     # first failing push is undecided, and the command says the budget decides
-    assert max(max(row) for row in out["largest"]) < 1.0  # N s (0.89 at 30 steps)
+    assert max(max(row) for row in out["largest"]) < 1.5  # N s (0.89 to 20 at 30 steps)
     assert "at 8 of 8" in out["largest_reason"] and "raise --steps" in out["largest_reason"]
     assert out["gait_stable"] is True and out["gait_spectral_radius"] < 1.0
     assert all(p in (0.0, 0.5) for p in out["most_fragile_phase"])

@@ -19,6 +19,7 @@ def _case(title, case):
 
 SECTION_LABELS = (r"$q_1$ (rad)", r"$\dot q_1$ (rad/s)", r"$\dot q_2$ (rad/s)")
 SECTION_SYMBOLS = (r"$q_1$", r"$\dot q_1$", r"$\dot q_2$")
+SECTION_UNITS = ("rad", "rad/s", "rad/s")
 
 
 def plot_basin(b, path=None, title=None, case=None):
@@ -26,6 +27,7 @@ def plot_basin(b, path=None, title=None, case=None):
     undecided white; the gait marked by a star (compare Schwab and Wisse 2001).
     `case` (e.g. `"stable gait, 3 deg"`) is named in the title. Returns the figure."""
     from matplotlib.colors import ListedColormap
+    from matplotlib.ticker import MaxNLocator
 
     plt = pyplot()
     from ..robustness import CONVERGED, FELL, OTHER_CYCLE, UNDECIDED
@@ -59,7 +61,8 @@ def plot_basin(b, path=None, title=None, case=None):
         b.z_star[ix], b.z_star[iy], marker="*", color="red", ms=14, mec="k", label="gait", ls="none"
     )
     cb = fig.colorbar(im, ax=ax)
-    cb.set_label(f"steps to converge (within {b.tol:g} of the gait)")
+    cb.ax.yaxis.set_major_locator(MaxNLocator(integer=True))
+    cb.set_label(f"steps to converge (within {b.tol:g} of the gait, own units)")
     ax.set_xlabel(SECTION_LABELS[ix] + " just after impact")
     ax.set_ylabel(SECTION_LABELS[iy] + " just after impact")
     other = [k for k in range(len(b.z_star)) if k not in b.axes]
@@ -68,7 +71,8 @@ def plot_basin(b, path=None, title=None, case=None):
         title
         or _case("Basin of attraction", case)
         + f", slice ({fixed}); grey: falls\n"
-        f"converging area {b.area:.4g}, fraction {b.fraction:.3f}",
+        f"converging area {b.area:.4g} {SECTION_UNITS[ix]} x {SECTION_UNITS[iy]}, "
+        f"fraction {b.fraction:.3f}",
         fontsize=9,
     )
     ax.legend(loc="upper right", fontsize=8)
@@ -92,7 +96,7 @@ def plot_contraction(c, path=None, case=None):
     fitted = f"fitted rate {rate:.4f}" if np.isfinite(rate) else "none stayed near the gait"
     ax.semilogy([], [], color="C0", label=f"simulated recoveries ({fitted})")
     ax.set_xlabel("step k")
-    ax.set_ylabel(r"$\|x_k - x^*\|_\infty$ after impact")
+    ax.set_ylabel(r"$\|x_k - x^*\|_\infty$ after impact (rad; rad/s $\times$ time scale)")
     ax.set_title(
         _case("Contraction", case) + f"\nerror /10 in {float(c.steps_10x):.2f} steps, /100 in "
         f"{float(c.steps_100x):.2f} (predicted)",
@@ -118,13 +122,16 @@ def plot_terrain(heights, rec, period, path=None, gsn=None, case=None):
         c = cmap(0.5 + 0.5 * h / hmax)
         lbl = f"h = {1000 * h:+.1f} mm" + (" (falls)" if int(rec.label[i]) == 1 else "")
         a1.plot(np.arange(n), T[i, :n], "o-", ms=3, color=c, label=lbl)
-        a2.semilogy(np.arange(n + 1), np.maximum(d[i, : n + 1], 1e-12), "o-", ms=3, color=c)
+        # from step 1 (step 0 is the gait itself: its distance is rounding)
+        a2.semilogy(np.arange(1, n + 1), d[i, 1 : n + 1], "o-", ms=3, color=c)
     a1.axhline(period, color="k", lw=0.8, ls="--", label="gait period")
     a1.set_xlabel("step (0 = the step onto the new level)")
     a1.set_ylabel("step time (s)")
     a1.legend(fontsize=7)
     a2.set_xlabel("step")
-    a2.set_ylabel(r"$\|x_k - x^*\|_\infty$")
+    a2.set_ylabel(r"$\|x_k - x^*\|_\infty$ after impact (rad; rad/s $\times$ time scale)")
+    # below 1e-7 the distances are the recovery integration's own error (rtol 1e-8)
+    a2.set_ylim(bottom=max(1e-7, a2.get_ylim()[0]))
     title = _case("Recovery from a single step up (+) / down (-)", case)
     if gsn is not None:
         title += f"; gait sensitivity norm {gsn:.3g} s/m"
