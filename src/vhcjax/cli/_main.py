@@ -122,19 +122,23 @@ def _stop_on_signals():
     threading.Thread(target=wait, name="vhcjax-signals", daemon=True).start()
 
 
-def main(argv=None):
-    """Run the command line `argv` (default `sys.argv[1:]`); returns the exit status:
-    0, 1 (the computation failed, e.g. no gait found, or an output could not be
-    written), 2 (bad input), 130 (interrupted); as a process also 143 (SIGTERM), 129
-    (SIGHUP) and 141 (standard output closed by its reader, e.g. `| head`)."""
+def parse_command(argv=None):
+    """The parsed command line `argv` (default `sys.argv[1:]`), or `None` for bad
+    arguments, once their one line is printed; `--help` prints and exits. Imports no
+    JAX (`vhcjax --help` answers at once). A process's own command line (`argv` is
+    `None`) also gets its signal handlers (`_stop_on_signals`)."""
     os.environ.setdefault("MPLBACKEND", "Agg")  # figures go to files
     if argv is None:
         _stop_on_signals()
     try:
-        args = build_parser().parse_args(argv)
+        return build_parser().parse_args(argv)
     except ArgumentError as e:
         print(e, file=sys.stderr)
-        return 2
+        return None
+
+
+def run_command(args):
+    """Run the command `args` (`parse_command`); returns its exit status (see `main`)."""
     QUIET["on"] = bool(getattr(args, "quiet", False))
     if not QUIET["on"]:
         _first_run_note()
@@ -146,6 +150,15 @@ def main(argv=None):
             return _run(args)
     finally:
         sys.stdout = stdout
+
+
+def main(argv=None):
+    """Run the command line `argv` (default `sys.argv[1:]`); returns the exit status:
+    0, 1 (the computation failed, e.g. no gait found, or an output could not be
+    written), 2 (bad input), 130 (interrupted); as a process also 143 (SIGTERM), 129
+    (SIGHUP) and 141 (standard output closed by its reader, e.g. `| head`)."""
+    args = parse_command(argv)
+    return 2 if args is None else run_command(args)
 
 
 class _StdoutError(OSError):
