@@ -4,6 +4,7 @@ Each subcommand lives in its own module of `vhcjax.cli` exposing `register(subpa
 bad input becomes a one-line message and exit status 2 instead of a traceback.
 """
 
+import contextlib
 import errno
 import importlib
 import os
@@ -46,24 +47,11 @@ def build_parser():
     sub = parser.add_subparsers(dest="command", required=True)
     for name in SUBCOMMANDS:
         importlib.import_module(f"vhcjax.cli.{name}").register(sub)
-    for command in sub.choices.values():
-        if not any("--quiet" in a.option_strings for a in command._actions):
-            command.add_argument(
-                "--quiet", action="store_true", help="no progress bars or notes on stderr"
-            )
-    return parser
-
-
-def _first_run_note():
-    """Say so when the compilation cache is empty: the first run compiles the programs."""
-    import jax
-
-    directory = jax.config.values["jax_compilation_cache_dir"]
-    if directory and (not os.path.isdir(directory) or not os.listdir(directory)):
-        print(
-            f"vhcjax: compiling (first run only; later runs load the programs from {directory})",
-            file=sys.stderr,
+    for command in sub.choices.values():  # one --quiet, the same for every command
+        command.add_argument(
+            "--quiet", action="store_true", help="no progress bars or notes on stderr"
         )
+    return parser
 
 
 #: Signals that stop a command, and the word its one line says: Ctrl-C, a batch
@@ -138,14 +126,17 @@ def parse_command(argv=None):
 
 
 def run_command(args):
-    """Run the command `args` (`parse_command`); returns its exit status (see `main`)."""
+    """Run the command `args` (`parse_command`); returns its exit status (see `main`).
+    Without `--quiet`, a program that takes more than about 2 s to compile or load is
+    named by a note on stderr (`vhcjax._programs.notes_to`)."""
+    from .._programs import notes_to
+
     QUIET["on"] = bool(getattr(args, "quiet", False))
-    if not QUIET["on"]:
-        _first_run_note()
+    notes = contextlib.nullcontext() if QUIET["on"] else notes_to(_note_writer(args.command))
     stdout = sys.stdout
     sys.stdout = _Stdout(stdout)
     try:
-        with warnings.catch_warnings():
+        with warnings.catch_warnings(), notes:
             warnings.showwarning = _one_line_warning(args.command)
             return _run(args)
     finally:
@@ -159,6 +150,17 @@ def main(argv=None):
     (SIGHUP) and 141 (standard output closed by its reader, e.g. `| head`)."""
     args = parse_command(argv)
     return 2 if args is None else run_command(args)
+
+
+def _note_writer(command):
+    """Print a note as one line on stderr, above any progress bar."""
+
+    def write(text):
+        from tqdm import tqdm
+
+        tqdm.write(f"vhcjax {command}: {one_line(text)}", file=sys.stderr)
+
+    return write
 
 
 class _StdoutError(OSError):
