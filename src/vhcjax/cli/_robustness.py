@@ -124,7 +124,7 @@ def _stability(args, model, z, out, consequence):
 
 
 def _bar(args):
-    return None if args.quiet else (lambda it: progress(it, total=len(it)))
+    return None if args.quiet else (lambda it: progress(it, total=len(it), desc=args.command))
 
 
 def register(subparsers):
