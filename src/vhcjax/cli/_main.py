@@ -158,7 +158,10 @@ def _note_writer(command):
     def write(text):
         from tqdm import tqdm
 
-        tqdm.write(f"vhcjax {command}: {one_line(text)}", file=sys.stderr)
+        try:
+            tqdm.write(f"vhcjax {command}: {one_line(text)}", file=sys.stderr)
+        except OSError:  # no terminal any more: the command goes on, untold
+            pass
 
     return write
 
