@@ -15,9 +15,9 @@ def main():
     """Run `vhcjax` with `sys.argv[1:]`; returns the exit status (`vhcjax.cli.main`)."""
     spec = importlib.util.find_spec("vhcjax")
     if "vhcjax" in sys.modules or spec is None or spec.loader is None:
-        from vhcjax.cli import main as run_all
+        from vhcjax.cli import main as cli_main
 
-        return run_all()
+        return cli_main()
     package = importlib.util.module_from_spec(spec)
     sys.modules["vhcjax"] = package  # submodules import; `__init__` has not run
     from vhcjax.cli._main import parse_command, run_command
