@@ -14,12 +14,17 @@ the same jobs in the same run.
 - A fresh Python process: `find_gait` and `gait_multipliers` (both multiplier methods) at
   3 degrees, with an empty cache and again (warm cache).
 - The other commands at the sizes users run, second runs.
+- `vhcjax --help` and `vhcjax gait --help` in fresh processes, through the console
+  command's entry point (`_vhcjax_command.main`, which imports no JAX for them), against
+  `python -m vhcjax --help` and `import vhcjax` (which import JAX); the median of
+  `--repeats` runs each. `--help-only` times only these.
 - `--compiler-options`: only the first runs (`gait --json`, and `sweep` at N1 slopes),
   each with an empty cache, with vhcjax's XLA options on the CPU
   (`vhcjax._programs.compiler_options()`) and with XLA's defaults, alternating, the
   median of `--repeats` runs each.
 
-    python benchmarks/bench_cli.py [--quick] [--json OUT] [--compiler-options [--repeats R]]
+    python benchmarks/bench_cli.py [--quick] [--json OUT] [--help-only] [--repeats R]
+                                   [--compiler-options]
 """
 
 import argparse
@@ -105,6 +110,27 @@ XLA_DEFAULTS_CLI = (
 )
 
 
+#: What the `vhcjax` console script runs (`[project.scripts]` in `pyproject.toml`).
+CONSOLE = [sys.executable, "-c", "import sys; from _vhcjax_command import main; sys.exit(main())"]
+
+
+def time_help(work, repeats):
+    """Fresh processes answering `--help` (the median of `repeats` runs each)."""
+    env = dict(os.environ, VHCJAX_CACHE_DIR=os.path.join(work, "cache-help"))
+    jobs = {  # key: (what a user types, the command)
+        "help_s": ("vhcjax --help", CONSOLE + ["--help"]),
+        "gait_help_s": ("vhcjax gait --help", CONSOLE + ["gait", "--help"]),
+        "python_m_help_s": ("python -m vhcjax --help", [sys.executable, "-m", "vhcjax", "--help"]),
+        "import_s": ("python -c 'import vhcjax'", [sys.executable, "-c", "import vhcjax"]),
+    }
+    rows = {}
+    for key, (name, cmd) in jobs.items():
+        t = statistics.median(_timed(cmd, env, work)[0] for _ in range(repeats))
+        rows[key] = t
+        print(f"{name}: {t:.2f} s (median of {repeats}, fresh processes)", flush=True)
+    return {"help": dict(repeats=repeats, **rows)}
+
+
 def _timed(cmd, env, cwd):
     t0 = time.perf_counter()
     out = subprocess.run(cmd, env=env, cwd=cwd, capture_output=True, text=True, check=False)
@@ -125,7 +151,10 @@ def main(argv=None):
         action="store_true",
         help="only first runs, with vhcjax's XLA options and with XLA's defaults",
     )
-    ap.add_argument("--repeats", type=int, default=3, help="runs of each (--compiler-options)")
+    ap.add_argument(
+        "--repeats", type=int, default=3, help="runs of each (--help timings, --compiler-options)"
+    )
+    ap.add_argument("--help-only", action="store_true", help="only the --help timings")
     args = ap.parse_args(argv)
     if args.repeats < 1:
         ap.error("--repeats must be at least 1")
@@ -138,7 +167,10 @@ def main(argv=None):
         rows = compare_compiler_options(work, n1, args.repeats)
         _finish(work, args, rows)
         return
-    rows = {}
+    rows = time_help(work, max(args.repeats, 5))
+    if args.help_only:
+        _finish(work, args, rows)
+        return
 
     # gait + multipliers: first run (empty cache), second run; scipy script
     first, _ = _timed(vhcjax + ["gait", "--slope-deg", "3", "--json", "--quiet"], env, work)

@@ -205,6 +205,16 @@ def _rows(name, res):
                     "cached",
                 )
             )
+        h = res["help"]
+        rows.append(
+            (
+                "`vhcjax --help`, fresh process",
+                f"{h['help_s']:.2f} s",
+                "-",
+                "-",
+                f"none: no JAX imported (`import vhcjax`: {h['import_s']:.1f} s)",
+            )
+        )
         return rows
     raise ValueError(name)
 

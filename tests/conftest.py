@@ -4,6 +4,9 @@ import os
 # loading what an earlier one traced) are tested in `test_programs.py`, which turns them
 # on. Set before vhcjax is imported: subprocesses of the tests inherit it.
 os.environ.setdefault("VHCJAX_PROGRAMS", "off")
+# Commands run in the tests print no note of a slow compile (`vhcjax._programs.preparing`):
+# their stderr is what they say; `test_cli_waits.py` turns the notes on.
+os.environ.setdefault("VHCJAX_NOTE_AFTER", "inf")
 
 import jax  # noqa: E402
 import pytest  # noqa: E402

@@ -21,10 +21,17 @@ host callback, e.g. a `throw=True` check): that is remembered, and it is traced 
 usual way.
 
 On the CPU, every program here is compiled with `compiler_options()`.
+
+Within `notes_to(write)` (the command line, unless `--quiet`), a program that takes more
+than about 2 s to trace, compile or load is named by a note (`preparing`): it is then
+compiled before it runs (`lower().compile()`, which fills the caches that its call finds),
+so that the note tells a compile from a long run. Without a receiver nothing changes.
 """
 
+import contextlib
 import functools
 import hashlib
+import math
 import os
 import pickle
 import re
@@ -66,6 +73,87 @@ def _source():
     if _source_hash is None:
         _source_hash = _hash_sources()
     return _source_hash
+
+
+#: Seconds that tracing, compiling or loading a program may take before a note says so
+#: (`preparing`); the environment variable `VHCJAX_NOTE_AFTER` sets another.
+NOTE_AFTER = 2.0
+_receivers = []  # the `notes_to` blocks open now: (write, notes written), innermost last
+
+
+@contextlib.contextmanager
+def notes_to(write):
+    """Within this block, from any thread, a program that takes more than `NOTE_AFTER`
+    seconds to trace, compile or load is named by `write(text)`, one line each
+    (`preparing`). For the command line: the library alone prints nothing."""
+    entry = (write, set())
+    _receivers.append(entry)
+    try:
+        yield
+    finally:
+        _receivers.remove(entry)
+
+
+def note_after():
+    """`NOTE_AFTER`, or the seconds that `VHCJAX_NOTE_AFTER` gives (`inf`: no notes)."""
+    text = os.environ.get("VHCJAX_NOTE_AFTER", "").strip()
+    if not text:
+        return NOTE_AFTER
+    try:
+        seconds = float(text)
+    except ValueError:
+        raise ValueError(f"VHCJAX_NOTE_AFTER must be a number of seconds, got {text!r}") from None
+    if math.isnan(seconds) or seconds < 0:
+        raise ValueError(f"VHCJAX_NOTE_AFTER must be 0 or more seconds, got {text!r}")
+    return seconds
+
+
+def _listening():
+    """Whether a note would be written (`notes_to` open, a finite `note_after()`)."""
+    return bool(_receivers) and math.isfinite(note_after())
+
+
+@contextlib.contextmanager
+def preparing(what, again=None):
+    """A block that traces, compiles or loads a program. If it takes more than
+    `note_after()` seconds, a watcher thread writes the note `what` to the innermost
+    `notes_to` receiver while the block still runs, or `again` (default `what`) if that
+    receiver has had `what` already. Nothing without a receiver."""
+    delay = note_after()
+    if not _receivers or not math.isfinite(delay):
+        yield
+        return
+    write, written = _receivers[-1]
+    done = threading.Event()
+
+    def watch():
+        if not done.wait(delay):
+            text = what if what not in written else (again or what)
+            written.add(what)
+            write(text)
+
+    watcher = threading.Thread(target=watch, name="vhcjax-note", daemon=True)
+    watcher.start()
+    try:
+        yield
+    finally:
+        done.set()
+        watcher.join()
+
+
+def _cache_note(loading):
+    """The note (`preparing`) of a program loaded from the cache or compiled anew, and
+    that of a later one."""
+    directory = jax.config.values["jax_compilation_cache_dir"]
+    if loading:
+        return f"loading compiled programs from {directory}", "loading another compiled program"
+    if directory and program_directory() is not None:
+        how = f"first run only; later runs load the programs from {directory}"
+    elif directory:
+        how = "stored programs are off (VHCJAX_PROGRAMS=off): every run traces them"
+    else:
+        how = "the compilation cache is off: every run compiles them"
+    return f"compiling ({how})", "compiling another program"
 
 
 #: What this process did: programs `exported` (traced and stored), `loaded` (from disk),
@@ -206,15 +294,22 @@ class _Program:
         self._out_tree = jax.tree_util.tree_structure(out_skeleton)
         self._out_static = out_static
 
-    def __call__(self, leaves):
+    def _placed(self, leaves):
         # One signature for every call: weak types and uncommitted arrays would each make
         # the wrapper compile again (the program itself wants plain dtypes on one device).
         device = next(
             (next(iter(x.sharding.device_set)) for x in leaves if getattr(x, "committed", False)),
             jax.devices()[0],
         )
-        leaves = [jax.device_put(_plain(x), device) for x in leaves]
-        out = self._call(*leaves)
+        return [jax.device_put(_plain(x), device) for x in leaves]
+
+    def compile(self, leaves):
+        """Compile (or load from the compilation cache) the program for `leaves` now,
+        without running it: its calls then find it compiled."""
+        self._call.lower(*self._placed(leaves)).compile()
+
+    def __call__(self, leaves):
+        out = self._call(*self._placed(leaves))
         return eqx.combine(jax.tree_util.tree_unflatten(self._out_tree, out), self._out_static)
 
 
@@ -363,12 +458,22 @@ def stored_jit(fn):
     nested = eqx.filter_jit(fn)  # traced into another program, compiled as part of it
     top = []  # on its own: the `filter_jit` with `compiler_options()`, made at first use
 
+    compiled = set()  # `_signature`s compiled under a note (`preparing`)
+
     def run_plain(traced, args, kwargs):
         if traced:
             return nested(*args, **kwargs)
         if not top:
             options = compiler_options()  # passed on to `jax.jit` (untyped in equinox)
             top.append(eqx.filter_jit(fn, compiler_options=options))  # pyright: ignore[reportCallIssue]
+        if _listening():
+            signature = _signature(args, kwargs)
+            if signature is not None and signature not in compiled:
+                with _lock:
+                    if signature not in compiled:
+                        with preparing(*_cache_note(loading=False)):
+                            top[0].lower(*args, **kwargs).compile()
+                        compiled.add(signature)
         return top[0](*args, **kwargs)
 
     def plain(*args, **kwargs):
@@ -391,7 +496,10 @@ def stored_jit(fn):
             with _lock:
                 program = _memo.get(path, False)
                 if program is False:
-                    program = _obtain(fn, path, in_tree, static, leaves, call_text)
+                    with preparing(*_cache_note(loading=os.path.exists(path))):
+                        program = _obtain(fn, path, in_tree, static, leaves, call_text)
+                        if program is not None and _listening():
+                            program.compile(leaves)
                     _memo[path] = program
         if program is None:
             return run_plain(traced, args, kwargs)
@@ -399,6 +507,24 @@ def stored_jit(fn):
 
     call.plain = plain  # pyright: ignore[reportAttributeAccessIssue]  (the filter_jit path)
     return call
+
+
+def _signature(args, kwargs):
+    """What a plain call's program depends on (structure, static values, shapes, dtypes,
+    placement), hashable; `None` where a static value is not."""
+    dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
+    leaves, in_tree = jax.tree_util.tree_flatten(dynamic)
+    avals = tuple(
+        (x.shape, str(x.dtype), getattr(x, "weak_type", False), getattr(x, "sharding", None))
+        for x in leaves
+    )
+    signature = (in_tree, jax.tree_util.tree_structure(static), avals)
+    signature += tuple(jax.tree_util.tree_leaves(static))
+    try:
+        hash(signature)
+    except TypeError:
+        return None
+    return signature
 
 
 def _obtain(fn, path, in_tree, static, leaves, call):

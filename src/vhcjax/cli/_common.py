@@ -719,17 +719,20 @@ def warn(args, message):
 
 #: Set by `--quiet` (every command has it): no progress bars, no notes on stderr.
 QUIET = {"on": False}
+#: Seconds between redraws of a progress bar: its elapsed time moves while nothing
+#: finishes (a compile, a long chunk).
+TICK = 1.0
 
 
 def progress(iterable=None, total=None, desc=None, disable=None):
-    """A tqdm progress bar on stderr (silent with `--quiet`, when stderr is not a terminal
-    and in CI)."""
+    """A tqdm progress bar on stderr, redrawn every `TICK` seconds (silent with
+    `--quiet`, when stderr is not a terminal and in CI)."""
     from tqdm import tqdm
 
     if QUIET["on"]:
         disable = True
 
-    return tqdm(
+    bar = tqdm(
         iterable,
         total=total,
         desc=desc,
@@ -738,3 +741,29 @@ def progress(iterable=None, total=None, desc=None, disable=None):
         disable=disable,
         dynamic_ncols=True,
     )
+    if not bar.disable:
+        _keep_redrawing(bar)
+    return bar
+
+
+def _keep_redrawing(bar):
+    """Redraw `bar` every `TICK` seconds from a daemon thread until it is closed."""
+    import threading
+    import weakref
+
+    ref = weakref.ref(bar)  # a bar dropped without `close` stops the thread too
+    closed = threading.Event()
+
+    def redraw():
+        while not closed.wait(TICK):
+            shown = ref()
+            if shown is None:
+                return
+            with shown.get_lock():  # `close` disables the bar, then clears it
+                if shown.disable:
+                    return
+                shown.refresh(nolock=True)
+            del shown
+
+    threading.Thread(target=redraw, name="vhcjax-progress", daemon=True).start()
+    weakref.finalize(bar, closed.set)

@@ -4,6 +4,7 @@ Each subcommand lives in its own module of `vhcjax.cli` exposing `register(subpa
 bad input becomes a one-line message and exit status 2 instead of a traceback.
 """
 
+import contextlib
 import errno
 import importlib
 import os
@@ -46,24 +47,11 @@ def build_parser():
     sub = parser.add_subparsers(dest="command", required=True)
     for name in SUBCOMMANDS:
         importlib.import_module(f"vhcjax.cli.{name}").register(sub)
-    for command in sub.choices.values():
-        if not any("--quiet" in a.option_strings for a in command._actions):
-            command.add_argument(
-                "--quiet", action="store_true", help="no progress bars or notes on stderr"
-            )
-    return parser
-
-
-def _first_run_note():
-    """Say so when the compilation cache is empty: the first run compiles the programs."""
-    import jax
-
-    directory = jax.config.values["jax_compilation_cache_dir"]
-    if directory and (not os.path.isdir(directory) or not os.listdir(directory)):
-        print(
-            f"vhcjax: compiling (first run only; later runs load the programs from {directory})",
-            file=sys.stderr,
+    for command in sub.choices.values():  # one --quiet, the same for every command
+        command.add_argument(
+            "--quiet", action="store_true", help="no progress bars or notes on stderr"
         )
+    return parser
 
 
 #: Signals that stop a command, and the word its one line says: Ctrl-C, a batch
@@ -122,30 +110,60 @@ def _stop_on_signals():
     threading.Thread(target=wait, name="vhcjax-signals", daemon=True).start()
 
 
+def parse_command(argv=None):
+    """The parsed command line `argv` (default `sys.argv[1:]`), or `None` for bad
+    arguments, once their one line is printed; `--help` prints and exits. Imports no
+    JAX (`vhcjax --help` answers at once). A process's own command line (`argv` is
+    `None`) also gets its signal handlers (`_stop_on_signals`)."""
+    os.environ.setdefault("MPLBACKEND", "Agg")  # figures go to files
+    if argv is None:
+        _stop_on_signals()
+    try:
+        return build_parser().parse_args(argv)
+    except ArgumentError as e:
+        print(e, file=sys.stderr)
+        return None
+
+
+def run_command(args):
+    """Run the command `args` (`parse_command`); returns its exit status (see `main`).
+    Without `--quiet`, a program that takes more than about 2 s to compile or load is
+    named by a note on stderr (`vhcjax._programs.notes_to`)."""
+    from .._programs import notes_to
+
+    QUIET["on"] = bool(getattr(args, "quiet", False))
+    notes = contextlib.nullcontext() if QUIET["on"] else notes_to(_note_writer(args.command))
+    stdout = sys.stdout
+    sys.stdout = _Stdout(stdout)
+    try:
+        with warnings.catch_warnings(), notes:
+            warnings.showwarning = _one_line_warning(args.command)
+            return _run(args)
+    finally:
+        sys.stdout = stdout
+
+
 def main(argv=None):
     """Run the command line `argv` (default `sys.argv[1:]`); returns the exit status:
     0, 1 (the computation failed, e.g. no gait found, or an output could not be
     written), 2 (bad input), 130 (interrupted); as a process also 143 (SIGTERM), 129
     (SIGHUP) and 141 (standard output closed by its reader, e.g. `| head`)."""
-    os.environ.setdefault("MPLBACKEND", "Agg")  # figures go to files
-    if argv is None:
-        _stop_on_signals()
-    try:
-        args = build_parser().parse_args(argv)
-    except ArgumentError as e:
-        print(e, file=sys.stderr)
-        return 2
-    QUIET["on"] = bool(getattr(args, "quiet", False))
-    if not QUIET["on"]:
-        _first_run_note()
-    stdout = sys.stdout
-    sys.stdout = _Stdout(stdout)
-    try:
-        with warnings.catch_warnings():
-            warnings.showwarning = _one_line_warning(args.command)
-            return _run(args)
-    finally:
-        sys.stdout = stdout
+    args = parse_command(argv)
+    return 2 if args is None else run_command(args)
+
+
+def _note_writer(command):
+    """Print a note as one line on stderr, above any progress bar."""
+
+    def write(text):
+        from tqdm import tqdm
+
+        try:
+            tqdm.write(f"vhcjax {command}: {one_line(text)}", file=sys.stderr)
+        except OSError:  # no terminal any more: the command goes on, untold
+            pass
+
+    return write
 
 
 class _StdoutError(OSError):

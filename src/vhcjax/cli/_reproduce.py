@@ -20,7 +20,6 @@ def register(subparsers):
         action="store_true",
         help="small sizes (short sweeps, coarse basin, few slopes): for tests",
     )
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run_reproduce)
     return p
 

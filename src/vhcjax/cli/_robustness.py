@@ -50,7 +50,6 @@ def _common(p, png_help):
     add_method_flag(p)
     p.add_argument("--json", action="store_true", help="print the results as one JSON object")
     p.add_argument("--png", metavar="FILE", help=png_help)
-    p.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
 def _gait(args):
@@ -125,7 +124,7 @@ def _stability(args, model, z, out, consequence):
 
 
 def _bar(args):
-    return None if args.quiet else (lambda it: progress(it, total=len(it)))
+    return None if args.quiet else (lambda it: progress(it, total=len(it), desc=args.command))
 
 
 def register(subparsers):

@@ -200,7 +200,7 @@ def model_families(model):
     return out
 
 
-@eqx.filter_jit
+@stored_jit  # top level after a shooting search: kept on disk, and named while it compiles
 def _fixed_point_gait(model, fp, family):
     """The `Gait` of a fixed point of the step map (`vhcjax.fixed_point`)."""
     from ..hybrid import step_unchecked
