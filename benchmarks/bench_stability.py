@@ -63,8 +63,7 @@ def main(argv=None):
     import jax
     import jax.numpy as jnp
 
-    from vhcjax import CompassGait
-    from vhcjax.stability import _multipliers as S
+    from vhcjax import CompassGait, stability as S
 
     psis = np.radians(np.linspace(args.lo, args.hi, args.slopes))
     t0 = time.perf_counter()

@@ -4,14 +4,10 @@ docs/figures."""
 
 import time
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
-from vhcjax.hybrid import _poincare as P
-from vhcjax.models._kneed_walker import KneedWalker
-from vhcjax.robustness._basin import basin_slice
-from vhcjax.robustness._recovery import CONVERGED
+import vhcjax as vj
 
 
 def main(n=21):
@@ -20,14 +16,14 @@ def main(n=21):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    m = KneedWalker(psi=jnp.asarray(0.0504))
-    fp = eqx.filter_jit(P.fixed_point)(m, jnp.array([0.19, -1.10, -0.04]))
+    m = vj.KneedWalker(psi=jnp.asarray(0.0504))
+    fp = vj.fixed_point(m, jnp.array([0.19, -1.10, -0.04]))
     t = time.time()
-    bs = basin_slice(
+    bs = vj.basin_slice(
         m, fp.z, axes=(0, 1), half_widths=(0.08, 0.6), shape=(n, n), num_steps=40, chunk=512
     )
     print("time", time.time() - t, "fraction", bs.fraction, "reach", bs.max_converging)
-    conv = np.asarray(bs.label) == CONVERGED
+    conv = np.asarray(bs.label) == vj.CONVERGED
     fig, ax = plt.subplots(figsize=(5, 4))
     ax.pcolormesh(
         fp.z[0] + bs.offsets_x, fp.z[1] + bs.offsets_y, conv, cmap="Greens", shading="nearest"

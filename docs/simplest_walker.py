@@ -14,7 +14,6 @@ import jax.numpy as jnp
 import numpy as np
 
 import vhcjax as vj
-from vhcjax.hybrid import fixed_point_jit, jacobian_jit
 
 FIGURE = pathlib.Path(__file__).resolve().parent / "figures" / "simplest_walker.png"
 #: Slopes where the small-slope correction is fitted (rad).
@@ -42,7 +41,7 @@ def garcia(model, z):
 
 
 def multipliers(model, z):
-    ev = np.linalg.eigvals(np.asarray(jacobian_jit(model, jnp.asarray(z))))
+    ev = np.linalg.eigvals(np.asarray(vj.poincare_jacobian(model, jnp.asarray(z))))
     return ev[np.argsort(-np.abs(ev))]
 
 
@@ -50,7 +49,7 @@ def family(family_name, slopes):
     """Period-1 gaits of `family_name` at `slopes` (ascending), continued from the
     reference gait: `(z, periods, multipliers)`, arrays over slopes."""
     ref_model, ref_z = vj.SimplestWalker().reference_gait(family_name)
-    ref = fixed_point_jit(ref_model, ref_z)
+    ref = vj.fixed_point(ref_model, ref_z)
     psi0 = float(ref_model.psi)
     out = {}
     for part in (slopes[slopes <= psi0][::-1], slopes[slopes > psi0]):
@@ -72,7 +71,7 @@ def attractor(walker, stable_family, psi, k, num_steps=800):
     x0 = model.section_to_state(jnp.asarray(stable_family[0][i] + np.array([0.0, 0.0, 1e-4])))
     sim = vj.simulate(model, x0, num_steps)
     assert vj.result_names(sim.result) == "successful", psi
-    fp = fixed_point_jit(model, model.state_to_section(sim.steps.x_plus[-1]), k)
+    fp = vj.fixed_point(model, model.state_to_section(sim.steps.x_plus[-1]), k)
     assert vj.result_names(fp.result) == "successful", (psi, k)
     return fp.z
 
@@ -108,7 +107,7 @@ def main():
     print("gaits at psi = 0.009 rad (theta*, theta'*, phi'*, tau, |multipliers|)")
     for name in ("stable", "unstable"):
         model, z0 = walker.reference_gait(name)
-        fp = fixed_point_jit(model, z0)
+        fp = vj.fixed_point(model, z0)
         th, dth, dph = garcia(model, fp.z)
         ev = multipliers(model, fp.z)
         print(

@@ -24,8 +24,8 @@ import os
 import numpy as np
 
 import vhcjax as vj
+from vhcjax import stability as S
 from vhcjax.plotting._stability import plot_bifurcation, plot_multipliers_complex
-from vhcjax.stability import _multipliers as S
 
 FULL = os.environ.get("VHCJAX_FULL") == "1"
 # Figures go to $VHCJAX_NOTEBOOK_OUT, or to a fresh temporary folder: never into the

@@ -27,7 +27,6 @@ import jax.numpy as jnp
 import numpy as np
 
 import vhcjax as vj
-from vhcjax.hybrid import _poincare as P
 
 FULL = os.environ.get("VHCJAX_FULL") == "1"
 
@@ -90,12 +89,12 @@ class RodWalker(vj.WalkerModel):
 
 # %%
 model = RodWalker(psi=jnp.asarray(0.03))
-fp = eqx.filter_jit(P.fixed_point)(model, jnp.array([0.2, -1.0, -0.2]))
+fp = vj.fixed_point(model, jnp.array([0.2, -1.0, -0.2]))
 print("fixed point:", vj.result_names(fp.result), np.asarray(fp.z), "period", fp.periods)
 assert fp.result == vj.RESULTS.successful
 
 x_start = model.section_to_state(fp.z + jnp.array([0.0, 0.01, 0.0]))
-sim = eqx.filter_jit(vj.simulate)(model, x_start, 60)
+sim = vj.simulate(model, x_start, 60)
 z_path = jax.vmap(model.state_to_section)(sim.steps.x_plus)
 dist = np.max(np.abs(np.asarray(z_path) - np.asarray(fp.z)), axis=1)
 print(
@@ -112,21 +111,21 @@ assert sim.result == vj.RESULTS.successful and dist[-1] < 1e-6 * max(dist[0], 1.
 # and the transverse linearization (thesis ch. 6, generic in n)
 
 # %%
-J = eqx.filter_jit(P.jacobian)(model, fp.z)
+J = vj.poincare_jacobian(model, fp.z)
 h = 1e-6
-step_jit = eqx.filter_jit(lambda m, z: P.step_map(m, z).z_next)
 Jfd = np.stack(
-    [(step_jit(model, fp.z + h * e) - step_jit(model, fp.z - h * e)) / (2 * h) for e in np.eye(3)],
+    [
+        (vj.step_map(model, fp.z + h * e).z_next - vj.step_map(model, fp.z - h * e).z_next)
+        / (2 * h)
+        for e in np.eye(3)
+    ],
     axis=1,
 )
 ev = np.linalg.eigvals(np.asarray(J))
 print("multipliers (jacfwd):", ev, "| max |J - J_fd|:", np.abs(np.asarray(J) - Jfd).max())
 
-from vhcjax.gait._vhc_n import vhc_orbit  # noqa: E402
-from vhcjax.stability._transverse import transverse_linearization  # noqa: E402
-
-orb = eqx.filter_jit(vhc_orbit)(model, fp.z)
-tl = eqx.filter_jit(transverse_linearization)(model, fp.x0, orb.x_minus, fp.periods[0])
+orb = eqx.filter_jit(vj.vhc_orbit)(model, fp.z)
+tl = eqx.filter_jit(vj.transverse_linearization)(model, fp.x0, orb.x_minus, fp.periods[0])
 print(
     "VHC arc:",
     vj.result_names(orb.result),
@@ -143,10 +142,8 @@ assert np.abs(ev_sorted(tl.multipliers) - ev_sorted(ev)).max() < 1e-6
 # ## A basin slice (section coordinates q1, dq1)
 
 # %%
-from vhcjax.robustness._basin import basin_slice  # noqa: E402
-
 n = 41 if FULL else 5
-bs = basin_slice(model, fp.z, axes=(0, 1), half_widths=(0.02, 0.1), shape=(n, n), num_steps=40)
+bs = vj.basin_slice(model, fp.z, axes=(0, 1), half_widths=(0.02, 0.1), shape=(n, n), num_steps=40)
 assert bs.label[n // 2, n // 2] == vj.CONVERGED if hasattr(vj, "CONVERGED") else True
 print(f"basin slice {n}x{n}: fraction converged {bs.fraction:.2f}")
 print(np.asarray(bs.label))

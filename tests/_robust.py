@@ -6,26 +6,23 @@ import jax.numpy as jnp
 import numpy as np
 
 import vhcjax as vj
-from vhcjax.hybrid import _poincare as _poincare
-from vhcjax.hybrid._simulate import DEFAULT_CONFIG, simulate_jit
+from vhcjax.hybrid import DEFAULT_CONFIG
 
 SEED = (0.2187, -1.092, -0.377)  # Newton seed (rounded) for the stable 3-degree gait
-fixed_point_jit = _poincare.fixed_point_jit
-step_jit = vj.step  # jitted by the library
 
 
 @functools.cache
 def stable_gait():
     """`(model, z_star, x_star, period)` of the stable 3-degree gait (Newton, 1e-12)."""
     model = vj.CompassGait()
-    fp = fixed_point_jit(model, jnp.asarray(SEED))
+    fp = vj.fixed_point(model, jnp.asarray(SEED))
     assert vj.result_names(fp.result) == "successful"
     return model, fp.z, fp.x0, float(fp.periods[0])
 
 
 def long_walk(model, x0, num_steps=80):
     """Independent check: plain `simulate` at the default tolerances (1e-10)."""
-    return simulate_jit(model, jnp.asarray(x0, float), num_steps, config=DEFAULT_CONFIG)
+    return vj.simulate(model, jnp.asarray(x0, float), num_steps, config=DEFAULT_CONFIG)
 
 
 def returns_to(sim, x_star, tol=1e-6):

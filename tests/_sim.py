@@ -12,7 +12,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import vhcjax as vj
-from vhcjax.hybrid._simulate import simulate_jit, step_unchecked
+from vhcjax.hybrid import step_unchecked
 
 THESIS_7_5 = np.array([0.218669, -0.323389, -1.092386, -0.377377])  # thesis (7.5)
 THESIS_7_7 = THESIS_7_5 + 0.01  # thesis (7.7): every entry perturbed by 0.01
@@ -27,7 +27,7 @@ def make_model(slope_deg=3.0, **kw):
 
 def walk(model, x0):
     """`NUM_STEPS` steps, default config, unbatched (one compilation)."""
-    return simulate_jit(model, jnp.asarray(x0, float), NUM_STEPS)
+    return vj.simulate(model, jnp.asarray(x0, float), NUM_STEPS)
 
 
 @functools.cache
@@ -63,5 +63,5 @@ def batch_models(slopes_deg):
 def thesis_walk_dense(num_steps=4, dense_points=60):
     """A short dense simulation from (7.5), for dense-output checks and figures."""
     return jax.block_until_ready(
-        simulate_jit(make_model(), jnp.asarray(THESIS_7_5), num_steps, dense_points=dense_points)
+        vj.simulate(make_model(), jnp.asarray(THESIS_7_5), num_steps, dense_points=dense_points)
     )

@@ -53,9 +53,7 @@ def test_gait_json(capsys):
     assert out["multipliers"] is None and out["transverse_result"] == "not_requested"
     assert "--transverse" in out["multipliers_reason"]
     z = np.array([out["x0"][0], out["x0"][2], out["x0"][3]])
-    fd = np.linalg.eigvals(
-        np.asarray(vj.stability.finite_difference_jacobian_jit(vj.CompassGait(), z))
-    )
+    fd = np.linalg.eigvals(np.asarray(vj.stability.finite_difference_jacobian(vj.CompassGait(), z)))
     ev = np.array(out["multipliers_poincare"])
     np.testing.assert_allclose(
         sorted(np.abs(ev[:, 0] + 1j * ev[:, 1])), sorted(np.abs(fd)), atol=1e-6

@@ -588,7 +588,7 @@ def test_continuation_in_calls_equals_the_searches_and_runs_only_its_points():
     k = 3
     s_buf = np.concatenate([s[:k], np.full(C._CHUNK - k, s[k - 1])])
     z0 = np.asarray(z0, float)  # the arguments as `_run_continuation` gives them
-    out = C._continue_jit(ref, end, s_buf, np.asarray(k), z0, sign, "vhc", np.asarray(s[0]), z0)
+    out = C._continue(ref, end, s_buf, np.asarray(k), z0, sign, "vhc", np.asarray(s[0]), z0)
     np.testing.assert_allclose(np.asarray(out.a[:k]), g.a[:k], rtol=0, atol=1e-12)
     assert np.all(np.asarray(out.a[k:]) == 0.0) and np.all(np.asarray(out.iterations[k:]) == 0)
 

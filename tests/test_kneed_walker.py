@@ -16,9 +16,6 @@ from vhcjax.hybrid import _poincare as P
 from vhcjax.hybrid._multidomain import multidomain_trajectory
 from vhcjax.models._kneed_walker import KneedWalker
 
-fixed_point_jit = P.fixed_point_jit
-jacobian_jit = P.jacobian_jit
-simulate_jit = vhcjax.simulate  # jitted by the library
 trajectory_jit = eqx.filter_jit(multidomain_trajectory)
 GUESS = jnp.array([0.19, -1.10, -0.04])  # near the Hsu Chen (2007) initial condition
 
@@ -30,14 +27,14 @@ def kw():
 
 @pytest.fixture(scope="module")
 def gait(kw):
-    sol = fixed_point_jit(kw, GUESS)
+    sol = vhcjax.fixed_point(kw, GUESS)
     assert sol.result == RESULTS.successful
     assert float(sol.residual) < 1e-10
     return sol
 
 
 def test_gait_confirmed_by_100_step_simulation(kw, gait):
-    sim = simulate_jit(kw, gait.x0, 100)
+    sim = vhcjax.simulate(kw, gait.x0, 100)
     assert sim.result == RESULTS.successful and int(sim.num_successful) == 100
     z = jax.vmap(kw.state_to_section)(sim.steps.x_plus)
     assert np.max(np.abs(z - gait.z)) < 1e-8
@@ -49,7 +46,7 @@ def test_gait_confirmed_by_100_step_simulation(kw, gait):
 
 def test_converges_from_perturbed_start(kw, gait):
     x0 = kw.section_to_state(gait.z + jnp.array([0.01, 0.05, -0.1]))
-    sim = simulate_jit(kw, x0, 100)
+    sim = vhcjax.simulate(kw, x0, 100)
     assert sim.result == RESULTS.successful
     z_end = kw.state_to_section(sim.steps.x_plus[-1])
     z_first = kw.state_to_section(sim.steps.x_plus[0])
@@ -61,9 +58,9 @@ def test_a_hyperextended_knee_is_not_a_start(kw, gait):
     """A start with the swing knee bent backward (flexion q2 - q3 < 0, past the knee
     stop) is out of the leg's range: `fell`, with no step taken."""
     x0 = kw.section_to_state(gait.z).at[2].add(0.2)  # q3 = q2 + 0.2: flexion -0.2 rad
-    sim = simulate_jit(kw, x0, 100)
+    sim = vhcjax.simulate(kw, x0, 100)
     assert sim.result == RESULTS.fell and int(sim.num_successful) == 0
-    straight = simulate_jit(kw, kw.section_to_state(gait.z).at[2].add(1e-12), 100)
+    straight = vhcjax.simulate(kw, kw.section_to_state(gait.z).at[2].add(1e-12), 100)
     assert straight.result == RESULTS.successful  # rounding below the stop is no fault
 
 
@@ -124,7 +121,7 @@ def test_impacts_at_the_gait_conserve_angular_momentum(kw, gait):
 
 
 def test_multipliers_autodiff_vs_central_differences(kw, gait):
-    J = np.asarray(jacobian_jit(kw, gait.z))
+    J = np.asarray(vhcjax.poincare_jacobian(kw, gait.z))
     h = 1e-6
 
     @eqx.filter_jit
@@ -148,7 +145,7 @@ def test_gait_derivatives_forward_reverse_and_central_differences(gait):
     against central differences of re-solved gaits."""
 
     def z_of(p):  # the compiled search runs on the values; only the derivative compiles
-        return fixed_point_jit(KneedWalker(mh=p[0], psi=p[1]), gait.z).z
+        return vhcjax.fixed_point(KneedWalker(mh=p[0], psi=p[1]), gait.z).z
 
     p = jnp.array([0.5, 0.0504])
     Jf = np.asarray(jax.jacfwd(z_of)(p))
@@ -175,17 +172,17 @@ def test_slope_range_by_continuation(kw, gait):
         while abs(psi - target) > 1e-9:
             psi_new = psi + np.sign(target - psi) * 0.005
             guess = 2 * z - z_prev if psi != 0.0504 else z
-            sol = fixed_point_jit(KneedWalker(psi=jnp.asarray(psi_new)), guess)
+            sol = vhcjax.fixed_point(KneedWalker(psi=jnp.asarray(psi_new)), guess)
             assert sol.result == RESULTS.successful, psi_new
             z_prev, z, psi = z, sol.z, psi_new
         model = KneedWalker(psi=jnp.asarray(psi))
-        ev = np.linalg.eigvals(np.asarray(jacobian_jit(model, z)))
+        ev = np.linalg.eigvals(np.asarray(vhcjax.poincare_jacobian(model, z)))
         found[target] = (model, z, np.abs(ev).max())
     assert found[0.1054][2] < 1.0 and found[0.0354][2] < 1.0
     assert found[0.1104][2] > 1.05
     model, z, _ = found[0.1104]
     x0 = model.section_to_state(z + jnp.array([1e-6, 0.0, 0.0]))
-    sim = simulate_jit(model, x0, 100)
+    sim = vhcjax.simulate(model, x0, 100)
     zs = jax.vmap(model.state_to_section)(sim.steps.x_plus)
     ok = np.asarray(sim.steps.result._value) == RESULTS.successful._value
     dist = np.max(np.abs(np.asarray(zs) - np.asarray(z)), axis=1)
@@ -198,7 +195,7 @@ def test_dense_simulation_joins_the_domains(kw, gait):
     each step's last point is the event solver's pre-impact state at its period, and the
     angles are continuous across the knee strike (only velocities jump)."""
     # 3 steps of 40 points per domain: the program `vhcjax simulate --plots` runs
-    sim = simulate_jit(kw, gait.x0, 3, dense_points=40)
+    sim = vhcjax.simulate(kw, gait.x0, 3, dense_points=40)
     assert sim.dense_t is not None and sim.dense_x is not None
     t, x = np.asarray(sim.dense_t), np.asarray(sim.dense_x)
     assert x.shape == (3, 80, 6)
@@ -211,7 +208,7 @@ def test_dense_simulation_joins_the_domains(kw, gait):
     assert np.all(np.abs(x[:, 39, 3:] - x[:, 40, 3:]).max(axis=1) > 1e-3)
     # a walker that falls in its first step: after the fall the points hold the last
     # state reached (the angles never jump back to the start)
-    fall = simulate_jit(kw, gait.x0 * jnp.array([1, 1, 1, 3, 3, 3]), 3, dense_points=40)
+    fall = vhcjax.simulate(kw, gait.x0 * jnp.array([1, 1, 1, 3, 3, 3]), 3, dense_points=40)
     assert fall.result != RESULTS.successful and int(fall.num_successful) == 0
     assert fall.dense_x is not None
     q = np.asarray(fall.dense_x[0, :, :3])
@@ -247,7 +244,7 @@ def test_cli_gait_and_multipliers(capsys, kw, gait):
     ev = np.asarray(rec["multipliers_poincare"])
     ev = np.sort(np.abs(ev[:, 0] + 1j * ev[:, 1]))
     np.testing.assert_allclose(rec["max_abs_multiplier"], ev[-1], atol=1e-12)
-    J = np.linalg.eigvals(np.asarray(jacobian_jit(kw, gait.z)))
+    J = np.linalg.eigvals(np.asarray(vhcjax.poincare_jacobian(kw, gait.z)))
     np.testing.assert_allclose(ev, np.sort(np.abs(J)), atol=1e-9)
 
     m = _json(
@@ -313,7 +310,7 @@ def test_cli_basin(capsys, kw, gait):
     np.testing.assert_allclose(rec["gait"], gait.z, atol=1e-10)
     assert rec["counts"]["converged"] == 9 and rec["fraction"] == 1.0
     for dz in ([0.01, 0.05, 0.0], [-0.01, -0.05, 0.0]):
-        sim = simulate_jit(kw, kw.section_to_state(gait.z + jnp.asarray(dz)), 100)
+        sim = vhcjax.simulate(kw, kw.section_to_state(gait.z + jnp.asarray(dz)), 100)
         assert sim.result == RESULTS.successful
         z_end = kw.state_to_section(sim.steps.x_plus[-1])
         assert np.max(np.abs(z_end - gait.z)) < 1e-4
@@ -332,20 +329,22 @@ def test_continued_gait_at_a_heavy_hip_and_where_a_continuation_stops(kw, gait, 
     heavy = KneedWalker(mh=50.0)
     fp, reached = P.continue_fixed_point(kw, gait.z, heavy)
     assert vhcjax.result_names(fp.result) == "successful" and reached is heavy
-    sim = simulate_jit(heavy, fp.x0, 100)
+    sim = vhcjax.simulate(heavy, fp.x0, 100)
     assert int(sim.num_successful) == 100
     zs = np.asarray(jax.vmap(heavy.state_to_section)(sim.steps.x_plus))
     assert np.abs(zs - np.asarray(fp.z)).max() < 1e-8
     z_prev = z = gait.z
     for k, mh in enumerate(np.geomspace(0.5, 50.0, 40)[1:]):
-        sol = fixed_point_jit(KneedWalker(mh=jnp.asarray(mh)), z if k == 0 else 2 * z - z_prev)
+        sol = vhcjax.fixed_point(KneedWalker(mh=jnp.asarray(mh)), z if k == 0 else 2 * z - z_prev)
         assert sol.result == RESULTS.successful, mh
         z_prev, z = z, sol.z
     np.testing.assert_allclose(np.asarray(fp.z), np.asarray(z), atol=1e-10)
-    direct = fixed_point_jit(heavy, gait.z)
+    direct = vhcjax.fixed_point(heavy, gait.z)
     assert direct.result == RESULTS.successful
     assert np.abs(np.asarray(direct.z) - np.asarray(fp.z)).max() > 0.05
-    assert np.abs(np.linalg.eigvals(np.asarray(jacobian_jit(heavy, direct.z)))).max() > 1.0
+    assert (
+        np.abs(np.linalg.eigvals(np.asarray(vhcjax.poincare_jacobian(heavy, direct.z)))).max() > 1.0
+    )
 
     fp, reached = P.continue_fixed_point(kw, gait.z, KneedWalker(ms=5.0))
     assert vhcjax.result_names(fp.result) == "fell"
@@ -353,16 +352,16 @@ def test_continued_gait_at_a_heavy_hip_and_where_a_continuation_stops(kw, gait, 
     back, _ = P.continue_fixed_point(kw, gait.z, reached)  # the part of the path it solved
     assert back.result == RESULTS.successful
     searches = []  # no way to go: the start's gait, from one search
-    real = P.fixed_point_jit
-    monkeypatch.setattr(P, "fixed_point_jit", lambda *a, **k: searches.append(1) or real(*a, **k))
+    real = P.fixed_point
+    monkeypatch.setattr(P, "fixed_point", lambda *a, **k: searches.append(1) or real(*a, **k))
     same, at = P.continue_fixed_point(kw, gait.z, kw)
     assert same.result == RESULTS.successful and at is kw and len(searches) == 1
     np.testing.assert_allclose(np.asarray(same.z), np.asarray(gait.z), atol=1e-10)
     # Newton from the default gait on the far model diverges (its start walks): coded
     # not_converged at its start, with finite numbers, never `nonfinite`
     slope = KneedWalker(psi=jnp.asarray(0.0087))
-    assert P.step_map_jit(slope, gait.z).result == RESULTS.successful
-    far = fixed_point_jit(slope, gait.z)
+    assert P.step_map(slope, gait.z).result == RESULTS.successful
+    far = vhcjax.fixed_point(slope, gait.z)
     assert vhcjax.result_names(far.result) == "not_converged"
     np.testing.assert_array_equal(np.asarray(far.z), np.asarray(gait.z))
     assert np.isfinite(np.asarray(far.z)).all() and np.isfinite(float(far.residual))

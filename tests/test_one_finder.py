@@ -180,7 +180,7 @@ def test_models_carry_their_facts():
         assert set(model.UNITS.values()) <= {"mass", "length", "acceleration"}
     # the literals are gaits (the other models' are checked with their tests)
     ref, z = vj.PendulumWalker().reference_gait("stable")
-    assert float(jnp.max(jnp.abs(vj.hybrid.fixed_point_jit(ref, z).z - z))) < 1e-9
+    assert float(jnp.max(jnp.abs(vj.fixed_point(ref, z).z - z))) < 1e-9
     with pytest.raises(ValueError, match="one gait family"):
         vj.KneedWalker().reference_gait("unstable")
     kneed = vj.find_gait(vj.KneedWalker(psi=0.052))

@@ -17,6 +17,7 @@ import pytest
 
 import vhcjax as vj
 from vhcjax import _programs
+from vhcjax.hybrid import _poincare
 
 SCRIPT = """
 import json, logging, math, sys
@@ -28,7 +29,7 @@ logging.getLogger("jax._src.compiler").setLevel(logging.DEBUG)
 m = vj.CompassGait(psi=math.radians(3.0))
 z = np.array([0.2187, -1.0924, -0.3774])
 sim = vj.simulate(m, m.section_to_state(z), 3)
-ev = vj.hybrid.multipliers_jit(m, z)
+ev = vj.poincare_multipliers(m, z)
 gaits = []
 if sys.argv[1:] == ["search"]:  # both searches (VHC, shooting) from a guess
     for method in ("vhc", "shooting"):
@@ -95,13 +96,13 @@ def _counts(monkeypatch):
 
 @_programs.stored_jit
 def _double_map(model, z, config):
-    return vj.hybrid.step_map_jit(model, z, config=config), 2 * z
+    return vj.step_map(model, z, config=config), 2 * z
 
 
 def test_a_new_source_misses(store, monkeypatch):
     counts = _counts(monkeypatch)
     model, z = vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774])
-    for fn in (vj.hybrid.step_map_jit,):
+    for fn in (vj.step_map,):
         a = fn(model, z)
         assert counts["exported"] == 1 and len(os.listdir(store)) == 1
         # the same function in a process that imported an edited library: another key,
@@ -122,12 +123,12 @@ def test_sources_edited_after_import_take_the_plain_path(store, monkeypatch):
     model, z = vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774])
     on_disk = _programs._hash_sources
     monkeypatch.setattr(_programs, "_hash_sources", lambda: "edited since import")
-    a = vj.hybrid.step_map_jit(model, z)
+    a = vj.step_map(model, z)
     assert counts == {"exported": 0, "loaded": 0, "unexportable": 0}
     assert not os.path.exists(store) or os.listdir(store) == []
     monkeypatch.setattr(_programs, "_hash_sources", on_disk)
     _programs._memo.clear()
-    b = vj.hybrid.step_map_jit(model, z)  # sources as imported: stored as usual
+    b = vj.step_map(model, z)  # sources as imported: stored as usual
     assert counts["exported"] == 1 and len(os.listdir(store)) == 1
     np.testing.assert_array_equal(np.asarray(a.z_next), np.asarray(b.z_next))
 
@@ -139,8 +140,8 @@ def test_types_from_outside_the_library_are_not_stored(store, monkeypatch):
         pass
 
     z = jnp.array([0.2187, -1.0924, -0.3774])
-    a = vj.hybrid.step_map_jit(MyWalker(), z)
-    b = vj.hybrid.step_map_jit(vj.CompassGait(), z)
+    a = vj.step_map(MyWalker(), z)
+    b = vj.step_map(vj.CompassGait(), z)
     assert counts == {"exported": 1, "loaded": 0, "unexportable": 0}  # only the library's
     np.testing.assert_allclose(np.asarray(a.z_next), np.asarray(b.z_next), rtol=0, atol=0)
     # a function defined outside the library is rejected the same way
@@ -150,10 +151,10 @@ def test_types_from_outside_the_library_are_not_stored(store, monkeypatch):
 def test_transformed_calls_take_the_plain_path(store, monkeypatch):
     counts = _counts(monkeypatch)
     model, z = vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774])
-    direct = vj.hybrid.step_map_jit(model, z).z_next
-    jitted = jax.jit(lambda z: vj.hybrid.step_map_jit(model, z).z_next)(z)
-    batched = jax.vmap(lambda z: vj.hybrid.step_map_jit(model, z).z_next)(z[None])
-    jac = jax.jacfwd(lambda z: vj.hybrid.step_map_jit(model, z).z_next)(z)
+    direct = vj.step_map(model, z).z_next
+    jitted = jax.jit(lambda z: vj.step_map(model, z).z_next)(z)
+    batched = jax.vmap(lambda z: vj.step_map(model, z).z_next)(z[None])
+    jac = jax.jacfwd(lambda z: vj.step_map(model, z).z_next)(z)
     assert counts["exported"] == 1 and len(os.listdir(store)) == 1  # the direct call only
     np.testing.assert_allclose(np.asarray(jitted), np.asarray(direct), rtol=0, atol=1e-14)
     np.testing.assert_allclose(np.asarray(batched[0]), np.asarray(direct), rtol=0, atol=1e-14)
@@ -184,13 +185,15 @@ def test_off_stores_nothing(tmp_path, monkeypatch):
     monkeypatch.setenv("VHCJAX_PROGRAMS", "off")
     assert _programs.program_directory() is None
     counts = _counts(monkeypatch)
-    vj.hybrid.step_map_jit(vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774]))
+    vj.step_map(vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774]))
     assert counts == {"exported": 0, "loaded": 0, "unexportable": 0}
 
 
 def test_outputs_keep_their_types(store):
-    out = vj.hybrid.step_map_jit(vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774]))
-    plain = vj.hybrid.step_map_jit.plain(vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774]))
+    out = vj.step_map(vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774]))
+    plain = _poincare._step_map.plain(
+        vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774]), 1, vj.DEFAULT_CONFIG
+    )
     assert type(out) is type(plain)
     assert jax.tree_util.tree_structure(out) == jax.tree_util.tree_structure(plain)
     assert eqx.tree_equal(out, plain, rtol=0, atol=1e-14)
@@ -201,9 +204,9 @@ def test_a_call_inside_another_program_becomes_part_of_it(store, monkeypatch):
     (whose compiler options `jax.jit` would refuse), the same numbers."""
     counts = _counts(monkeypatch)
     model, z = vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774])
-    inside = jax.jit(lambda: vj.hybrid.step_map_jit(model, z).z_next)()
+    inside = jax.jit(lambda: vj.step_map(model, z).z_next)()
     assert counts == {"exported": 0, "loaded": 0, "unexportable": 0}
-    alone = vj.hybrid.step_map_jit(model, z).z_next
+    alone = vj.step_map(model, z).z_next
     assert counts["exported"] == 1
     np.testing.assert_allclose(inside, alone, rtol=0, atol=1e-13)
 
@@ -215,7 +218,9 @@ def test_programs_compile_with_the_cpu_options():
     assert _programs.compiler_options() == {"xla_cpu_use_fusion_emitters": False}
     model, z = vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774])
     default = jax.jit(lambda z: vj.hybrid.step_map(model, z).z_next)(z)
-    np.testing.assert_allclose(vj.hybrid.step_map_jit.plain(model, z).z_next, default, atol=1e-13)
+    np.testing.assert_allclose(
+        _poincare._step_map.plain(model, z, 1, vj.DEFAULT_CONFIG).z_next, default, atol=1e-13
+    )
 
 
 def _warned_once(monkeypatch):
@@ -229,7 +234,7 @@ def test_a_stored_program_that_is_not_the_calls_is_traced_again(store, monkeypat
     types, and is stored anew (the next process loads it without a warning)."""
     counts = _counts(monkeypatch)
     model, z = vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774])
-    right = vj.hybrid.step_map_jit(model, z)
+    right = vj.step_map(model, z)
     other = _double_map(model, z, vj.hybrid.FAST_CONFIG)  # another program, beside it
     (mine,) = [p for p in store.iterdir() if not p.name.startswith("double_map")]
     (theirs,) = [p for p in store.iterdir() if p.name.startswith("double_map")]
@@ -238,7 +243,7 @@ def test_a_stored_program_that_is_not_the_calls_is_traced_again(store, monkeypat
     wrong_program = dict(record, exported=pickle.loads(theirs.read_bytes())["exported"])
     damages = {
         "stored for another call": theirs.read_bytes(),
-        "not of step_map": pickle.dumps(wrong_program),
+        "not of _step_map": pickle.dumps(wrong_program),
         "unreadable": b"not a pickled program",
     }
     for why, damaged in damages.items():
@@ -247,7 +252,7 @@ def test_a_stored_program_that_is_not_the_calls_is_traced_again(store, monkeypat
         _warned_once(monkeypatch)
         exported = counts["exported"]
         with pytest.warns(RuntimeWarning, match=re.escape(str(store))) as caught:
-            again = vj.hybrid.step_map_jit(model, z)
+            again = vj.step_map(model, z)
         assert len(caught) == 1 and why in str(caught[0].message), str(caught[0].message)
         assert type(again) is type(right)
         assert eqx.tree_equal(again, right, rtol=0, atol=0)
@@ -256,7 +261,7 @@ def test_a_stored_program_that_is_not_the_calls_is_traced_again(store, monkeypat
         loaded = counts["loaded"]
         with warnings.catch_warnings():
             warnings.simplefilter("error")
-            vj.hybrid.step_map_jit(model, z)
+            vj.step_map(model, z)
         assert counts["loaded"] == loaded + 1
     assert isinstance(other, tuple)
 
@@ -269,7 +274,7 @@ def test_the_command_line_warns_in_one_line_and_recomputes(store, monkeypatch, c
     argv = ["simulate", "--steps", "2", "--json", "--quiet"]
     assert main(argv) == 0
     first = json.loads(capsys.readouterr().out)
-    vj.hybrid.step_map_jit(vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774]))
+    vj.step_map(vj.CompassGait(), jnp.array([0.2187, -1.0924, -0.3774]))
     files = sorted(store.iterdir())
     contents = [p.read_bytes() for p in files]
     for p, data in zip(files, contents[1:] + contents[:1]):  # each holds the next one's

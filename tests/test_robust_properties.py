@@ -17,7 +17,7 @@ from hypothesis import HealthCheck, example, given, settings, strategies as st
 
 import vhcjax as vj
 from vhcjax.cli._multiplier_fields import stability_json
-from vhcjax.stability import AGREEMENT_RTOL, gait_multipliers_jit
+from vhcjax.stability import AGREEMENT_RTOL, gait_multipliers
 
 FLAGS = {
     "phase_not_monotone",
@@ -82,7 +82,7 @@ def test_random_models_gaits_repeat_and_multipliers_hold_or_are_flagged(model):
         atol=1e-6 * scale,
     )
     np.testing.assert_allclose(np.asarray(sim.steps.period), float(g.T), rtol=1e-6)
-    gm = gait_multipliers_jit(model, model.state_to_section(g.x_plus))
+    gm = gait_multipliers(model, model.state_to_section(g.x_plus))
     _no_nan(gm, "multipliers")
     tcode = vj.result_names(gm.transverse_result)
     _documented(tcode)
@@ -106,7 +106,7 @@ def test_light_hip_heavy_legs_transverse_flagged_poincare_decides():
     model = vj.CompassGait(m1=10.0, m2=10.0, mH=0.1)
     z = jnp.array([0.08746059606983951, -0.29956712894520626, 2.0239753024603226])
     assert vj.result_names(vj.simulate(model, model.section_to_state(z), 2).result) == "successful"
-    gm = gait_multipliers_jit(model, z)
+    gm = gait_multipliers(model, z)
     assert vj.result_names(gm.transverse_result) == "phase_not_monotone"
     np.testing.assert_allclose(
         np.sort(np.asarray(gm.poincare).real), [-1.0652440, 0.2205511, 0.7482446], atol=1e-6

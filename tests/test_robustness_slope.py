@@ -12,14 +12,11 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from _robust import fixed_point_jit, long_walk, returns_to, stable_gait, step_jit
+from _robust import long_walk, returns_to, stable_gait
 
 import vhcjax as vj
-from vhcjax.hybrid import _poincare as _poincare
 from vhcjax.hybrid._simulate import DEFAULT_CONFIG
 from vhcjax.robustness._terrain import floor_step_model
-
-multipliers_jit = _poincare.multipliers_jit
 
 
 @pytest.mark.slow
@@ -30,13 +27,13 @@ def test_slope_derivatives_vs_finite_differences():
     vals = []
     for sign in (1, -1):
         m = eqx.tree_at(lambda q: q.psi, model, model.psi + sign * h)
-        fp = fixed_point_jit(m, z)
+        fp = vj.fixed_point(m, z)
         assert vj.result_names(fp.result) == "successful"
-        sr = step_jit(m, fp.x0)
+        sr = vj.step(m, fp.x0)
         T = float(sr.period)
         L = float(np.linalg.norm(np.asarray(m.contact_point(sr.x_minus[:2]))))
         v = L / T
-        ev = np.asarray(multipliers_jit(m, fp.z))
+        ev = np.asarray(vj.poincare_multipliers(m, fp.z))
         vals.append((np.asarray(fp.z), float(T), float(L), float(v), ev[np.argsort(-np.abs(ev))]))
     fd = [(a - b) / (2 * h) for a, b in zip(vals[0], vals[1])]
     np.testing.assert_allclose(np.asarray(s.dz), fd[0], rtol=1e-5, atol=1e-6)
@@ -102,7 +99,7 @@ def test_slope_and_floor_sensitivity_refuse_or_flag_a_point_that_is_not_a_gait()
 
 def test_floor_offset_zero_is_nominal_step():
     model, _, x_star, period = stable_gait()
-    sr = step_jit(floor_step_model(model, 0.0), x_star)
+    sr = vj.step(floor_step_model(model, 0.0), x_star)
     np.testing.assert_allclose(np.asarray(sr.x_plus), np.asarray(x_star), atol=1e-9)
     assert abs(float(sr.period) - period) < 1e-9
 
@@ -113,7 +110,7 @@ def test_max_floor_step_brackets():
     assert th.bracketed.all()
     for i, sign in enumerate((-1.0, 1.0)):
         for mag, expect in ((th.lo[i], True), (th.hi[i], False)):
-            first = step_jit(floor_step_model(model, sign * mag), x_star, throw=False)
+            first = vj.step(floor_step_model(model, sign * mag), x_star, throw=False)
             ok = vj.result_names(first.result) == "successful"
             survived = ok and returns_to(long_walk(model, first.x_plus), x_star)
             assert survived == expect, (sign, mag)

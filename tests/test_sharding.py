@@ -49,7 +49,7 @@ SCRIPT = textwrap.dedent(
 
     # library entry points shard their batches over all local devices by themselves
     from vhcjax.robustness._basin import classify_section_points
-    from vhcjax.stability._multipliers import bifurcation_diagram
+    from vhcjax.stability import bifurcation_diagram
 
     m = vj.CompassGait()
     z_star = jnp.array([0.2186688, -1.09238359, -0.37737395])

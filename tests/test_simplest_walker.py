@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 import vhcjax as vj
-from vhcjax.hybrid import fixed_point_jit, jacobian_jit
+from vhcjax.hybrid import fixed_point, jacobian
 
 PAGE = pathlib.Path(__file__).resolve().parent.parent / "docs" / "simplest_walker.md"
 FAMILIES = {"stable": "long", "unstable": "short"}  # vhcjax's names, the reference's
@@ -79,7 +79,7 @@ def section(gamma, g):
 
 
 def multipliers(model, z):
-    ev = np.linalg.eigvals(np.asarray(jacobian_jit(model, jnp.asarray(z))))
+    ev = np.linalg.eigvals(np.asarray(jacobian(model, jnp.asarray(z))))
     return ev[np.argsort(-np.abs(ev))]
 
 
@@ -99,7 +99,7 @@ def vhcjax_family(name):
     `reference_gait`, then `continue_fixed_point` from slope to slope (up to 0.0145, down
     to 1e-5)."""
     model, z0 = vj.SimplestWalker().reference_gait(name)
-    fp = fixed_point_jit(model, z0)
+    fp = fixed_point(model, z0)
     assert successful(fp)
     out = {float(model.psi): (model, fp.z, float(fp.periods[0]))}
     for chain in ((0.0145,), (0.005, 0.001, 1e-4, 1e-5)):
@@ -380,7 +380,7 @@ def test_light_compass_gait_converges(name):
     dist = []
     for beta in (1e-2, 1e-3, 1e-4):
         cg = vj.CompassGait(m1=beta, m2=beta, mH=1.0, a=1.0 - b, b=b, g=1.0, psi=0.009)
-        fp = fixed_point_jit(cg, z)
+        fp = fixed_point(cg, z)
         assert successful(fp), beta
         dist.append(float(jnp.max(jnp.abs(fp.z - z))))
     assert 0.09 < dist[1] / dist[0] < 0.11 and 0.09 < dist[2] / dist[1] < 0.11, dist
@@ -392,10 +392,10 @@ def test_scaled_walker(name):
     """A walker of 1e6 kg on legs of 1 km under gravity 1e-4 m/s^2: the same angles, its
     rates and periods scaled by sqrt(l/g) and its energy by M g l."""
     big, z0 = vj.SimplestWalker(M=1e6, l=1e3, g=1e-4).reference_gait(name)
-    fp = fixed_point_jit(big, z0)
+    fp = fixed_point(big, z0)
     assert successful(fp)
     model, z, _ = vhcjax_family(name)[0.009]
-    unit = fixed_point_jit(model, z)
+    unit = fixed_point(model, z)
     ts = float(big.time_scale)
     assert np.max(np.abs(garcia(big, fp.z) - garcia(model, unit.z))) < 1e-9
     assert abs(float(fp.periods[0]) / ts - float(unit.periods[0])) < 1e-9

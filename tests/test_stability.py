@@ -10,8 +10,7 @@ import numpy as np
 import pytest
 
 import vhcjax
-from vhcjax import CompassGait
-from vhcjax.stability import _multipliers as S
+from vhcjax import CompassGait, stability as S
 
 PSI3 = math.radians(3.0)
 
@@ -22,9 +21,9 @@ def gaits3():
     m = CompassGait().with_slope(PSI3)
     out = {}
     for fam, seed in (("stable", (0.2187, -1.092, -0.377)), ("unstable", (0.2047, -1.211, -0.712))):
-        fp = S._fixed_point_jit(m, jnp.asarray(seed), 1, config=vhcjax.DEFAULT_CONFIG)
+        fp = vhcjax.fixed_point(m, jnp.asarray(seed), 1, config=vhcjax.DEFAULT_CONFIG)
         assert fp.result == vhcjax.RESULTS.successful
-        J = np.asarray(S._jacobian_jit(m, fp.z, 1, vhcjax.DEFAULT_CONFIG))
+        J = np.asarray(vhcjax.poincare_jacobian(m, fp.z, 1, vhcjax.DEFAULT_CONFIG))
         out[fam] = (np.asarray(fp.z), J)
     return m, out
 
@@ -43,7 +42,7 @@ def test_multipliers_do_not_depend_on_the_section(gaits3, family):
 
 
 def _deviations(m, z, dz, num_steps):
-    sim = S._simulate_jit(
+    sim = vhcjax.simulate(
         m, m.section_to_state(jnp.asarray(z + dz)), num_steps, config=vhcjax.DEFAULT_CONFIG
     )
     assert sim.result == vhcjax.RESULTS.successful
@@ -88,7 +87,7 @@ def flip():
     """The period-doubling slope of the stable family."""
     m = CompassGait()
     lo, hi = math.radians(4.25), math.radians(4.5)
-    fp = S._fixed_point_jit(
+    fp = vhcjax.fixed_point(
         m.with_slope(lo), jnp.asarray((0.2275, -1.14, -0.20)), 1, config=vhcjax.DEFAULT_CONFIG
     )
     assert fp.result == vhcjax.RESULTS.successful
@@ -106,12 +105,10 @@ def test_period_doubling_slope_located_to_1e_4_degrees(flip):
     signs = []
     for dpsi in (-1e-4, 1e-4):
         p = flip.psi + math.radians(dpsi)
-        fp = S._fixed_point_jit(
+        fp = vhcjax.fixed_point(
             m.with_slope(p), jnp.asarray(flip.z), 1, config=vhcjax.DEFAULT_CONFIG
         )
-        Jfd = S.finite_difference_jacobian_jit(
-            m.with_slope(p), fp.z, 1, 1e-5, vhcjax.DEFAULT_CONFIG
-        )
+        Jfd = S.finite_difference_jacobian(m.with_slope(p), fp.z, 1, 1e-5, vhcjax.DEFAULT_CONFIG)
         signs.append(np.sign(np.linalg.det(np.eye(3) + np.asarray(Jfd))))
     assert signs[0] * signs[1] < 0
 
@@ -124,7 +121,7 @@ def test_period_two_gait_is_a_fixed_point_of_two_simulator_steps(flip):
     assert br is not None and len(br["psi"]) == 1
     z = br["z"][0]
     mm = m.with_slope(psi)
-    sim = S._simulate_jit(mm, mm.section_to_state(jnp.asarray(z)), 2, config=vhcjax.DEFAULT_CONFIG)
+    sim = vhcjax.simulate(mm, mm.section_to_state(jnp.asarray(z)), 2, config=vhcjax.DEFAULT_CONFIG)
     assert sim.result == vhcjax.RESULTS.successful
     z1 = np.asarray(mm.state_to_section(sim.steps.x_plus[0]))
     z2 = np.asarray(mm.state_to_section(sim.steps.x_plus[1]))
@@ -198,7 +195,7 @@ def test_cli_bifurcation_json_and_files(tmp_path, capsys):
     r3 = rows[6].split(",")
     assert r3[1] == "successful" and r3[2] == "1"
     # the simulated step period (FAST_CONFIG, after 40 steps) is the Newton gait's period
-    fp = S._fixed_point_jit(
+    fp = vhcjax.fixed_point(
         CompassGait().with_slope(PSI3),
         jnp.asarray((0.2187, -1.092, -0.377)),
         1,
@@ -254,7 +251,7 @@ def test_period_four_gait_at_five_degrees():
     for a in o.multipliers:
         assert np.min(np.abs(o.multipliers_fd - a)) < 1e-6
     assert np.max(np.abs(o.multipliers)) < 1.0
-    sim = S._simulate_jit(
+    sim = vhcjax.simulate(
         m5, m5.section_to_state(jnp.asarray(o.z)), 4, config=vhcjax.DEFAULT_CONFIG
     )
     np.testing.assert_allclose(m5.state_to_section(sim.steps.x_plus[-1]), o.z, atol=1e-9)
@@ -273,7 +270,7 @@ def test_period1_family_is_the_poincare_fixed_point_at_every_slope(gaits3):
         assert vhcjax.result_names(fam.result) == ["successful"] * 3
         np.testing.assert_allclose(np.asarray(fam.z)[1], ref[family][0], atol=1e-10)
         for p, z, T in zip(psis, np.asarray(fam.z), np.asarray(fam.periods)):
-            fp = S._fixed_point_jit(
+            fp = vhcjax.fixed_point(
                 CompassGait().with_slope(p),
                 jnp.asarray(z) + 1e-4,
                 1,
@@ -314,7 +311,7 @@ def test_multipliers_only_of_a_gait_of_a_valid_model(gaits3):
     with pytest.raises(ValueError, match="3 section coordinates"):
         vhcjax.gait_multipliers(m, m.section_to_state(jnp.asarray(z)))
     # a result holding the gait (a `Gait`, a fixed point) is taken at its section point
-    fp = S._fixed_point_jit(m, jnp.asarray(z), 1, config=vhcjax.DEFAULT_CONFIG)
+    fp = vhcjax.fixed_point(m, jnp.asarray(z), 1, config=vhcjax.DEFAULT_CONFIG)
     np.testing.assert_allclose(
         np.asarray(vhcjax.gait_multipliers(m, fp).poincare),
         np.asarray(vhcjax.gait_multipliers(m, fp.z).poincare),

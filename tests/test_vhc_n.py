@@ -11,13 +11,10 @@ import pytest
 import vhcjax
 from vhcjax._results import RESULTS
 from vhcjax.gait._vhc_n import vhc_gait_search, vhc_orbit
-from vhcjax.hybrid import _poincare as P
 from vhcjax.mechanics import _lagrangian as mech
 from vhcjax.models._pendulum_walker import PendulumWalker
 from vhcjax.stability._transverse import transverse_linearization
 
-fixed_point_jit = P.fixed_point_jit
-jacobian_jit = P.jacobian_jit
 vhc_orbit_jit = eqx.filter_jit(vhc_orbit)
 transverse_jit = eqx.filter_jit(transverse_linearization)
 
@@ -34,7 +31,7 @@ def pw():
 @pytest.fixture(scope="module")
 def pw_gait(pw):
     # guess: the compass-gait gait with the pendulum hanging still
-    sol = fixed_point_jit(pw, jnp.array([0.2187, 0.0, -1.0924, -0.3774, 0.0]))
+    sol = vhcjax.fixed_point(pw, jnp.array([0.2187, 0.0, -1.0924, -0.3774, 0.0]))
     assert sol.result == RESULTS.successful and float(sol.residual) < 1e-10
     return sol
 
@@ -88,7 +85,7 @@ def test_transverse_linearization_matches_poincare_multipliers_3dof(pw, pw_gait)
     tl = transverse_jit(pw, pw_gait.x0, sr.x_minus, pw_gait.periods[0])
     assert tl.result == RESULTS.successful
     assert tl.Xi.shape == (5, 5)  # 2n - 1 transverse coordinates
-    ev_p = np.asarray(jnp.linalg.eigvals(jacobian_jit(pw, pw_gait.z)))
+    ev_p = np.asarray(jnp.linalg.eigvals(vhcjax.poincare_jacobian(pw, pw_gait.z)))
     ev_t = np.asarray(tl.multipliers)
     np.testing.assert_allclose(np.sort_complex(ev_t), np.sort_complex(ev_p), atol=1e-6)
     assert np.abs(ev_p).max() < 1.0  # a stable passive 3-DOF gait

@@ -114,7 +114,7 @@ def run_multipliers(args):
     gait, why = find_walker_gait(args, model, args.family or "stable")
     z = model.state_to_section(gait.x_plus)
     compass = vhc_applies(model)  # the transverse linearization is the compass gait's
-    gm = S.gait_multipliers_jit(model, z, transverse=compass)
+    gm = S.gait_multipliers(model, z, transverse=compass)
     pc = np.asarray(gm.poincare)
     tr = None if gm.transverse is None else np.asarray(gm.transverse)
     stab = stability_json(gm)
@@ -316,7 +316,7 @@ def _aperiodic_message(slopes, aperiodic, transient, record):
     show (`detect_period` 0): a chaotic walk, or one not yet settled."""
     import numpy as np
 
-    from ..stability._multipliers import PERIOD_CANDIDATES
+    from ..stability._bifurcation import PERIOD_CANDIDATES
 
     where = np.asarray(slopes)[np.asarray(aperiodic)]
     tried = [str(p) for p in PERIOD_CANDIDATES if p < record]

@@ -65,7 +65,7 @@ def _gait(args):
 
     from .._results import result_names
     from ..gait import vhc_applies
-    from ..hybrid import fixed_point_jit
+    from ..hybrid import fixed_point
 
     model = walker_from_args(args)
     try:
@@ -76,7 +76,7 @@ def _gait(args):
         # a seed may name a gait of either family (the unstable one, say)
         gait, _ = find_walker_gait(args, model, "unstable", args.gait, "--gait")
     z = model.state_to_section(gait.x_plus)
-    fp = fixed_point_jit(model, z)
+    fp = fixed_point(model, z)
     if result_names(fp.result) != "successful":
         raise ComputationFailed(
             f"the gait at slope {args.slope_deg:g} deg is no fixed point of the simulated "
@@ -110,9 +110,9 @@ def _stability(args, model, z, out, consequence):
     figure (`consequence`)."""
     import numpy as np
 
-    from ..hybrid import jacobian_jit
+    from ..hybrid import jacobian
 
-    rho = float(np.max(np.abs(np.linalg.eigvals(np.asarray(jacobian_jit(model, z))))))
+    rho = float(np.max(np.abs(np.linalg.eigvals(np.asarray(jacobian(model, z))))))
     out["gait_spectral_radius"] = rho
     out["gait_stable"] = rho < 1.0
     if rho >= 1.0:

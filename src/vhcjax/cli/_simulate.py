@@ -125,7 +125,7 @@ def run(args):
     import jax.numpy as jnp
 
     from .._results import result_names
-    from ..hybrid import simulate_jit
+    from ..hybrid import simulate
 
     model = walker_from_args(args)
     if args.x0 is None:
@@ -145,7 +145,7 @@ def run(args):
     check_output_dir(args.plots, "--plots")  # created now, before the work
 
     dense = DENSE_POINTS if (args.plots or args.animate) else 0
-    sim = simulate_jit(model, jnp.asarray(args.x0, float), args.steps, dense_points=dense)
+    sim = simulate(model, jnp.asarray(args.x0, float), args.steps, dense_points=dense)
     result = result_names(sim.result)
     steps = steps_as_dicts(sim)
 

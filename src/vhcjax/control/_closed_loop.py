@@ -185,6 +185,31 @@ def stabilize(
     """
     z = jnp.asarray(z, float)
     check_section_shape(model, z)
+    # Weights, torque limit and gait as arrays: one compiled program serves them all.
+    Q, R, Q_jump = _as_weights(model, Q, R, Q_jump)
+    check_torque_limit(torque_limit)
+    return _stabilize(
+        model,
+        z,
+        Q,
+        R,
+        Q_jump,
+        torque_limit=jnp.asarray(torque_limit, float),
+        num_points=num_points,
+        config=config,
+    )
+
+
+def _as_weights(model, Q, R, Q_jump):
+    r, m = 2 * model.n_dof - 1, num_inputs(model)
+    Q = weight_matrix("Q", Q, r, jnp.eye(r))
+    return Q, weight_matrix("R", R, m, jnp.eye(m)), weight_matrix("Q_jump", Q_jump, r, Q)
+
+
+@stored_jit
+def _stabilize(model, z, Q, R, Q_jump, *, torque_limit, num_points, config):
+    """`stabilize` for checked weights and torque limit (arrays): one compiled program per
+    model class, grid size and `config` (a stored program, see `vhcjax._programs`)."""
     system = transverse_system(model, model.section_to_state(z), num_points=num_points)
     ric = riccati_backward(model, system, Q, R, Q_jump)
     ric2 = riccati_hamiltonian(model, system, Q, R, Q_jump)
@@ -375,43 +400,6 @@ def closed_loop_max_push(
 
 # Jitted entry points (models and feedback laws carry array leaves: one compilation
 # serves every slope, weight and torque limit).
-_stabilize_jit = stored_jit(stabilize)
-
-
-def _as_weights(model, Q, R, Q_jump):
-    r, m = 2 * model.n_dof - 1, num_inputs(model)
-    Q = weight_matrix("Q", Q, r, jnp.eye(r))
-    return Q, weight_matrix("R", R, m, jnp.eye(m)), weight_matrix("Q_jump", Q_jump, r, Q)
-
-
-def _stabilize(
-    model,
-    z,
-    Q=None,
-    R=None,
-    Q_jump=None,
-    *,
-    torque_limit: float | jax.Array = jnp.inf,
-    num_points=401,
-    config=TIGHT_CONFIG,
-):
-    # Weights, torque limit and gait as arrays: one compiled program serves them all.
-    Q, R, Q_jump = _as_weights(model, Q, R, Q_jump)
-    check_torque_limit(torque_limit)
-    return _stabilize_jit(
-        model,
-        jnp.asarray(z, float),
-        Q,
-        R,
-        Q_jump,
-        torque_limit=jnp.asarray(torque_limit, float),
-        num_points=num_points,
-        config=config,
-    )
-
-
-_stabilize.__doc__ = stabilize.__doc__
-stabilize = _stabilize
 closed_loop_basin = stored_jit(closed_loop_basin)
 closed_loop_multipliers = stored_jit(closed_loop_multipliers)
 closed_loop_jacobian = stored_jit(closed_loop_jacobian)

@@ -37,7 +37,6 @@ from ._problem1 import (
 )
 from ._shooting import (
     complete_guess as complete_guess,
-    complete_guess_jit as complete_guess_jit,
     shooting_search as shooting_search,
 )
 from ._sweep import (

@@ -74,6 +74,7 @@ def _path(start, end):
     return path
 
 
+@stored_jit
 def _continue(start, end, s_buf, n, z0, sign, method, s_prev=None, z_prev=None):
     """Follow the solution of the model `_path(start, end)(s)` through `s_buf[:n]`
     (a `fori_loop` with a dynamic length over a fixed-size buffer), from the seed `z0` at
@@ -123,9 +124,6 @@ def _continue(start, end, s_buf, n, z0, sign, method, s_prev=None, z_prev=None):
     return jax.lax.fori_loop(0, n, body, init)[-1]
 
 
-_continue_jit = stored_jit(_continue)
-
-
 #: Points per call of the compiled continuation: every length of continuation runs as
 #: calls of this one size, so one program serves them all.
 _CHUNK = 16
@@ -153,7 +151,7 @@ def _run_continuation(start, end, s_values, z0, sign, method):
         k = len(s_run)
         s_buf = np.concatenate([s_run, np.full(_CHUNK - k, s_run[-1])])
         # `k` traced: a short last call shares the program.
-        out = _continue_jit(
+        out = _continue(
             start, end, s_buf, np.asarray(k), z_start, sign, method, np.asarray(s_prev), z_prev
         )
         skip = 0 if first else 1
@@ -237,11 +235,11 @@ def continue_to_model(model, family="stable", method="vhc", num=None):
         num = _homotopy_steps(start, own)
     gaits = _run_continuation(start, own, np.linspace(0.0, 1.0, num), z0, sign, method)
     gait = _relabel(jax.tree_util.tree_map(lambda x: x[-1], gaits), family)
-    return _gait_in_units_jit(gait, model)
+    return _finite_gait_in_units(gait, model)
 
 
 @eqx.filter_jit
-def _gait_in_units_jit(gait, model):
+def _finite_gait_in_units(gait, model):
     """`gait_in_units`; a failed gait's placeholders stay finite (a period of 0 would
     make its speed NaN)."""
     out = gait_in_units(gait, model)

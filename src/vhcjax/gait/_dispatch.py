@@ -1,10 +1,12 @@
 """One search by method name; which methods apply to a model."""
 
+from .._programs import stored_jit
 from ._gait import FAMILIES, METHODS
 from ._problem1 import vhc_search
 from ._shooting import shooting_search
 
 
+@stored_jit
 def _search(model, guess, sign, method, solver="newton", chord=False, axes=None, far=None):
     """`far`: VHC only (see `vhc_search`); `None`: its default."""
     if method == "vhc":

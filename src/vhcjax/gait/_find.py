@@ -17,7 +17,7 @@ from ..solvers import detach
 from ._continuation import (
     _HOMOTOPY_STEPS,
     _continue,
-    _gait_in_units_jit,
+    _finite_gait_in_units,
     _homotopy_steps,
     _seed,
     _unknowns,
@@ -159,15 +159,15 @@ def _compass_gait(model, family, method, guess, solver):
     g = guess * jnp.concatenate([jnp.ones(1), jnp.full(guess.shape[0] - 1, ts)])
     if method == "vhc":  # (a0, b0): a section point's dq2 is for shooting
         g = g[:2]
-    found = _relabel(_search_one_jit(own, g, family_sign(family), method, solver), family)
-    return _gait_in_units_jit(found, model)
+    found = _relabel(_search(own, g, family_sign(family), method, solver), family)
+    return _finite_gait_in_units(found, model)
 
 
 def _shooting_gait_of(model, family, guess):
     """A model without a VHC search: shooting, from `guess` (a section point) or by
     continuation from the model's `reference_gait` (`continue_fixed_point`), in the
     walker's own units."""
-    from ..hybrid import continue_fixed_point, fixed_point_jit
+    from ..hybrid import continue_fixed_point, fixed_point
 
     if family not in model_families(model):
         raise ValueError(
@@ -182,8 +182,8 @@ def _shooting_gait_of(model, family, guess):
         )
     else:
         check_section_shape(model, guess, "guess")
-        fp = fixed_point_jit(own, section_in_units(model, guess, ts))
-    return _gait_in_units_jit(_fixed_point_gait(own, fp, family), model)
+        fp = fixed_point(own, section_in_units(model, guess, ts))
+    return _finite_gait_in_units(_fixed_point_gait(own, fp, family), model)
 
 
 def model_families(model):
@@ -232,9 +232,6 @@ _CHORD_MIN_MEMBERS = 64
 #: Batches of at most this many members per host worker are not split over workers: the
 #: run is short next to its compilation, and splitting would compile a second size.
 _MIN_SPLIT = 8
-
-
-_search_one_jit = stored_jit(_search)
 
 
 #: `model.validate()` as one small program (not a dozen eager operations).

@@ -214,6 +214,8 @@ def _phi_error_norm(e):
     return optx.rms_norm(e[:3])
 
 
+# diffrax traces the field several times; jitted, the later traces reuse the first jaxpr.
+@stored_jit
 def _phi_field_unit(s, y, args):
     """`_phi_field` over $s \\in [0, 1]$, $\\theta = a + s (c - a)$: the integration
     interval is static, so diffrax inserts no runtime check of its direction (a host
@@ -222,10 +224,6 @@ def _phi_field_unit(s, y, args):
     a, span, field_args = args
     rate = _phi_field(a + s * span, y, field_args)
     return jnp.concatenate([span * rate[:3], rate[3:]])  # the flag counts in s
-
-
-# diffrax traces the field several times; jitted, the later traces reuse the first jaxpr.
-_phi_field_unit_jit = stored_jit(_phi_field_unit)
 
 
 def _with_tolerance(config, tol):
@@ -266,7 +264,7 @@ def _boundary_abd(model, data, a, b, d, real, config, h=None):
     sign = jnp.sign(b)
     regular_start = ok0 & (b != 0) & (d != 0)
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(_phi_field_unit_jit),
+        diffrax.ODETerm(_phi_field_unit),
         _solver(config.solver),
         t0=0.0,
         t1=1.0,

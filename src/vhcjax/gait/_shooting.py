@@ -16,6 +16,7 @@ from ._problem1 import _with_tolerance, on_other_root, solve_for_d, velocity_rel
 # ---------------------------------------------------------------------------------------
 # Shooting (Problem 2)
 # ---------------------------------------------------------------------------------------
+@stored_jit
 def complete_guess(model, ab, family="stable"):
     """Section coordinates $(a, b, f)$ of a guess $(a, b)$: $d$ from the energy quadratic
     with the `family` root, then $f$ from the impact relations (5.9). A seed for shooting
@@ -24,9 +25,6 @@ def complete_guess(model, ab, family="stable"):
     d, _ = solve_for_d(model, ab[0], ab[1], family)
     f, _ = velocity_relations(model, ab[0], ab[1], d)
     return jnp.stack([ab[0], ab[1], f])
-
-
-complete_guess_jit = stored_jit(complete_guess)
 
 
 def _shoot_eval(model, z, config=DEFAULT_CONFIG, tol=None):

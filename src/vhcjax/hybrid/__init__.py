@@ -23,13 +23,9 @@ from ._poincare import (
     MapResult as MapResult,
     continue_fixed_point as continue_fixed_point,
     fixed_point as fixed_point,
-    fixed_point_jit as fixed_point_jit,
     jacobian as jacobian,
-    jacobian_jit as jacobian_jit,
     multipliers as multipliers,
-    multipliers_jit as multipliers_jit,
     step_map as step_map,
-    step_map_jit as step_map_jit,
 )
 from ._simulate import (
     DEFAULT_CONFIG as DEFAULT_CONFIG,
@@ -46,7 +42,6 @@ from ._simulate import (
     ode_solver as ode_solver,
     simulate as simulate,
     simulate_batch as simulate_batch,
-    simulate_jit as simulate_jit,
     step as step,
     step_unchecked as step_unchecked,
 )

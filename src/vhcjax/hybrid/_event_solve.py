@@ -150,11 +150,11 @@ class _Jitted(eqx.Module):
     fn: Callable
 
     def __call__(self, t, y, args):
-        return _call_jit(self.fn, t, y, args)
+        return _call_field(self.fn, t, y, args)
 
 
 @eqx.filter_jit
-def _call_jit(fn, t, y, args):
+def _call_field(fn, t, y, args):
     return fn(t, y, args)
 
 

@@ -28,9 +28,9 @@ class MapResult(eqx.Module):
     result: RESULTS
 
 
-def step_map(model, z, k=1, config=DEFAULT_CONFIG):
-    """$P^k(z)$: `k` steps of the hybrid simulation from section coordinates `z`."""
-    k = check_map_steps(k)
+@stored_jit
+def _step_map(model, z, k, config):
+    """`step_map` for a checked `k` (an `int`)."""
     x = model.section_to_state(z)
     if k == 1:
         sr = step_unchecked(model, x, config)
@@ -47,20 +47,42 @@ def step_map(model, z, k=1, config=DEFAULT_CONFIG):
     return MapResult(model.state_to_section(x), periods, result)
 
 
+def step_map(model, z, k=1, config=DEFAULT_CONFIG):
+    """$P^k(z)$: `k` steps of the hybrid simulation from section coordinates `z`.
+
+    One compiled program per model class, `k` and `config` (a stored program, see
+    `vhcjax._programs`); traced into the caller's program under `jit`, `vmap` or a
+    derivative.
+    """
+    return _step_map(model, jnp.asarray(z, dtype=float), check_map_steps(k), config)
+
+
+@stored_jit
+def _jacobian(model, z, k, config):
+    """`jacobian` for a checked `k`."""
+    return jax.jacfwd(lambda zz: _step_map(model, zz, k, config).z_next)(z)
+
+
 def jacobian(model, z, k=1, config=DEFAULT_CONFIG):
-    """$\\partial P^k / \\partial z$ by forward-mode autodiff through the events."""
-    return jax.jacfwd(lambda zz: step_map(model, zz, k, config).z_next)(z)
+    """$\\partial P^k / \\partial z$ by forward-mode autodiff through the events (a stored
+    program, as `step_map`)."""
+    return _jacobian(model, jnp.asarray(z, dtype=float), check_map_steps(k), config)
+
+
+@stored_jit
+def _multipliers(model, z, k, config):
+    """`multipliers` for a checked `k`."""
+    ev = jnp.linalg.eigvals(_jacobian(model, z, k, config))
+    return ev[jnp.argsort(-jnp.abs(ev))]
 
 
 def multipliers(model, z, k=1, config=DEFAULT_CONFIG):
     """Eigenvalues of the Poincare-map Jacobian at `z` (sorted by modulus, descending).
 
-    Complex array of length 2n-1. Eigenvalue computation runs on the host (CPU) as JAX
-    only implements non-symmetric `eig` there.
+    Complex array of length 2n-1 (a stored program, as `step_map`). Eigenvalue
+    computation runs on the host (CPU) as JAX only implements non-symmetric `eig` there.
     """
-    J = jacobian(model, z, k, config)
-    ev = jnp.linalg.eigvals(J)
-    return ev[jnp.argsort(-jnp.abs(ev))]
+    return _multipliers(model, jnp.asarray(z, dtype=float), check_map_steps(k), config)
 
 
 class FixedPoint(eqx.Module):
@@ -85,16 +107,17 @@ class FixedPoint(eqx.Module):
 
 def _fixed_point_equation(z, model, k, config):
     """$P^k(z) - z$ and the step periods (for the implicit derivatives of `fixed_point`)."""
-    out = step_map(model, z, k, config)
+    out = _step_map(model, z, k, config)
     return out.z_next - z, out.periods
 
 
+@stored_jit
 def _search(model, z0, k, rtol, atol, max_steps, config):
     """The Newton search of `fixed_point` (on a model it does not differentiate)."""
     z0 = jnp.asarray(z0, dtype=float)
 
     def residual_fn(z, _):
-        out = step_map(model, z, k, config)
+        out = _step_map(model, z, k, config)
         r = out.z_next - z
         # A failed map (fall, missed strike) would otherwise be a silent constant: make
         # Newton see a large residual so it does not declare convergence.
@@ -113,7 +136,7 @@ def _search(model, z0, k, rtol, atol, max_steps, config):
     # own map where that fails (a seed that falls is coded `fell`, as a simulation
     # from it says), never with the code of a non-finite iterate.
     z = jnp.where(finite, sol.value, z0)
-    final = step_map(model, z, k, config)
+    final = _step_map(model, z, k, config)
     res = jnp.max(jnp.abs(final.z_next - z))
     ok_newton = (sol.result == optx.RESULTS.successful) & finite & jnp.isfinite(res)
     code = RESULTS.where(
@@ -145,36 +168,19 @@ def _with_derivatives(params, fp, k, config):
 def fixed_point(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, config=DEFAULT_CONFIG):
     """Solve $P^k(z) = z$ by Newton (optimistix) with forward-mode Jacobians (Problem 2).
 
-    A failed search raises nothing: inspect `result` (use under `vmap` freely); only a
-    `k` that is not a positive integer is a `ValueError`. Differentiable with respect
-    to the model's parameters (`jax.jvp`, `jax.jacfwd`, `jax.grad`, `jax.jacrev`) by the
-    implicit function theorem at the fixed point (`vhcjax.solvers.implicit_outputs`),
-    never through the Newton iterations; a failed search has zero derivatives.
+    The search is one compiled program per model class and static arguments (a stored
+    program, see `vhcjax._programs`). A failed search raises nothing: inspect `result`
+    (use under `vmap` freely); only a `k` that is not a positive integer is a
+    `ValueError`. Differentiable with respect to the model's parameters (`jax.jvp`,
+    `jax.jacfwd`, `jax.grad`, `jax.jacrev`) by the implicit function theorem at the fixed
+    point (`vhcjax.solvers.implicit_outputs`), never through the Newton iterations: the
+    derivatives run the same compiled search (on the parameters' values) and compile only
+    the implicit-derivative program. A failed search has zero derivatives.
     """
     z0 = jax.lax.stop_gradient(jnp.asarray(z0, dtype=float))
     k = check_map_steps(k)
     fp = _search(detach(model), z0, k, rtol, atol, max_steps, config)
     return _with_derivatives(model, fp, k, config)
-
-
-_search_jit = stored_jit(_search)
-
-
-def fixed_point_jit(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, config=DEFAULT_CONFIG):
-    """`fixed_point` with its search compiled once per process (a stored program). Its
-    derivatives run the same compiled search (on the parameters' values) and compile
-    only the implicit-derivative program."""
-    z0 = jax.lax.stop_gradient(jnp.asarray(z0, dtype=float))
-    k = check_map_steps(k)
-    fp = _search_jit(detach(model), z0, k, rtol, atol, max_steps, config)
-    return _with_derivatives(model, fp, k, config)
-
-
-# Shared jitted entry points (stored, see `vhcjax._programs`): one compile cache per
-# function for the whole library.
-step_map_jit = stored_jit(step_map)
-jacobian_jit = stored_jit(jacobian)
-multipliers_jit = stored_jit(multipliers)
 
 
 #: Largest relative change of a parameter in one step of `continue_fixed_point` at
@@ -203,7 +209,7 @@ def _homotopy_model(start, model, s):
 def continue_fixed_point(start, z_start, model, k=1, *, config=DEFAULT_CONFIG):
     """The fixed point of $P^k$ on `model` that continues the one of `start` near
     `z_start`: a homotopy in the parameters (every float parameter at once, geometrically
-    where both ends are positive), each step solved by `fixed_point_jit` from a secant
+    where both ends are positive), each step solved by `fixed_point` from a secant
     prediction. A step moves no parameter by more than 1.5 % at first, up to 6 % while
     steps succeed, and is halved where one fails, until it is 1/64 of the first (then
     the continuation stops there). So a gait family is
@@ -245,7 +251,7 @@ def continue_fixed_point(start, z_start, model, k=1, *, config=DEFAULT_CONFIG):
     if not math.isfinite(spread):
         raise ValueError("continue_fixed_point: every parameter must be finite")
     first = 1.0 / max(1, math.ceil(spread / _CONTINUATION_RATIO))
-    fp = fixed_point_jit(start, jnp.asarray(z_start, float), k, config=config)
+    fp = fixed_point(start, jnp.asarray(z_start, float), k, config=config)
     if fp.result != RESULTS.successful:
         return fp, start
     if spread == 0.0:  # `model` is `start`
@@ -255,7 +261,7 @@ def continue_fixed_point(start, z_start, model, k=1, *, config=DEFAULT_CONFIG):
         t = min(1.0, s + ds)
         guess = z if previous is None else z + (z - previous[1]) * ((t - s) / (s - previous[0]))
         m = model if t == 1.0 else _homotopy_model(start, model, t)
-        trial = fixed_point_jit(m, guess, k, config=config)
+        trial = fixed_point(m, guess, k, config=config)
         if trial.result == RESULTS.successful:
             previous, s, z, fp, reached = (s, z), t, trial.z, trial, m
             ds = min(1.5 * ds, 4 * first)

@@ -452,7 +452,6 @@ def simulate(model, x0, num_steps, *, config=DEFAULT_CONFIG, dense_points=0, thr
 # The public entry points are jitted once here (models carry array leaves, so one
 # compilation serves every parameter value); every caller shares these caches.
 step = stored_jit(step)
-simulate_jit = simulate
 
 
 @stored_jit

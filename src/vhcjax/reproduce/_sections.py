@@ -32,12 +32,6 @@ CHUNK = 8  # batch size of the family_multipliers calls (one program for all)
 GUESS = (0.20, -1.0)  # thesis (7.2)
 
 
-# ---------------------------------------------------------------------------------------
-# Shared compiled calls
-# ---------------------------------------------------------------------------------------
-_simulate_jit = simulate  # already jitted
-
-
 def _deg(x):
     return math.radians(x)
 
@@ -91,7 +85,7 @@ def _multipliers(slopes_deg, zs):
 
 def _sim(model, x0, sizes, dense=True):
     """One simulation shape for every section (one compile)."""
-    return _simulate_jit(
+    return simulate(
         model,
         jnp.asarray(x0, float),
         sizes["sim_steps"],

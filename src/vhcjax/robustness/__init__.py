@@ -48,7 +48,6 @@ from ._recovery import (
     Recovery as Recovery,
     label_names as label_names,
     recover as recover,
-    recover_jit as recover_jit,
 )
 from ._slope_sensitivity import (
     SlopeSensitivity as SlopeSensitivity,

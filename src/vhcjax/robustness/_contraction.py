@@ -118,7 +118,7 @@ def contraction(
         raise ValueError(f"contraction: scale must be positive and finite, got {scale}")
     z_star = jnp.asarray(z_star, dtype=float)
     key = jax.random.PRNGKey(0) if key is None else key
-    J, mr = _jacobian_jit(model, z_star, config)
+    J, mr = _jacobian_and_step(model, z_star, config)
     check_returns(z_star, mr.z_next, "contraction", str(result_names(mr.result)))
     ev = np.linalg.eigvals(np.asarray(J)).astype(complex)  # complex even when all are real
     ev = ev[np.argsort(-np.abs(ev))]
@@ -131,7 +131,9 @@ def contraction(
     z_own = section_in_units(model, z_star, ts)
     z0 = jax.vmap(lambda d: section_in_units(model, z_own + d, 1.0 / ts))(dz)
     x0 = jax.vmap(model.section_to_state)(z0)
-    rec = _recover_jit(model, x0, model.section_to_state(z_star), num_steps, config)
+    x_star = model.section_to_state(z_star)
+    # tol=0: nobody "converges", every recovery runs all steps (a full error history).
+    rec = recover(model, x0, x_star, num_steps, tol=0.0, config=config, stop_when_converged=False)
     # A walker that fell, or whose error grew tenfold (it left the neighbourhood where the
     # linearization holds, e.g. for another gait), measures no decay rate.
     dist = np.asarray(rec.distance)
@@ -154,7 +156,7 @@ def contraction(
 
 
 @stored_jit
-def _jacobian_jit(model, z, config):
+def _jacobian_and_step(model, z, config):
     """The step map's Jacobian at `z` and, from the same pass, the step itself."""
 
     def one_step(zz):
@@ -162,9 +164,3 @@ def _jacobian_jit(model, z, config):
         return mr.z_next, mr
 
     return jax.jacfwd(one_step, has_aux=True)(z)
-
-
-@stored_jit
-def _recover_jit(model, x0, x_star, num_steps, config):
-    # tol=0: nobody "converges", every recovery runs all steps (a full error history).
-    return recover(model, x0, x_star, num_steps, tol=0.0, config=config, stop_when_converged=False)

@@ -6,7 +6,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._results import result_names
-from ..hybrid import DEFAULT_CONFIG, check_section_shape, step_map_jit
+from ..hybrid import DEFAULT_CONFIG, check_section_shape, step_map
 from ..stability import GAIT_TOL, returns_to
 
 
@@ -32,5 +32,5 @@ def require_gait(model, z_star, name):
     """`check_returns` for one step of `model` from the section point `z_star`."""
     z = jnp.asarray(z_star, dtype=float)
     check_section_shape(model, z, f"{name}: z_star")
-    mr = step_map_jit(model, z, 1, DEFAULT_CONFIG)
+    mr = step_map(model, z, 1, DEFAULT_CONFIG)
     check_returns(z, mr.z_next, name, str(result_names(mr.result)))

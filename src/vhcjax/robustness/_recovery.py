@@ -98,6 +98,35 @@ def recover(
         raise ValueError(
             f"recover: num_steps and max_period must be at least 1, got {num_steps}, {max_period}"
         )
+    return _recover(
+        model,
+        x0,
+        x_star,
+        int(num_steps),
+        tol,
+        cycle_tol,
+        int(max_period),
+        config,
+        first_step,
+        stop_when_converged,
+    )
+
+
+@stored_jit
+def _recover(
+    model,
+    x0,
+    x_star,
+    num_steps,
+    tol,
+    cycle_tol,
+    max_period,
+    config,
+    first_step,
+    stop_when_converged,
+):
+    """`recover` for checked arguments: one compiled program per model class and static
+    arguments (a stored program, see `vhcjax._programs`)."""
     B = x0.shape[0]
     H = max_period + 1
     n = x_star.shape[-1] // 2
@@ -170,9 +199,6 @@ def recover(
     )
     result = eqx.tree_at(lambda r: r._value, RESULTS.successful, code)
     return Recovery(label, steps, period, result, x, dist, times)
-
-
-recover_jit = stored_jit(recover)
 
 
 def label_names(label):

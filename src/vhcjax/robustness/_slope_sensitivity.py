@@ -23,6 +23,7 @@ from ..solvers import implicit_outputs, linearised
 from ._gait_check import require_gait
 
 
+@stored_jit
 def gait_outputs(model, z, config=DEFAULT_CONFIG):
     """$(P(z), T, L, v)$: next section point, step period (s), step length (m, foot to foot
     at heel strike) and mean speed $L/T$ (m/s, along the slope) of one step from `z`."""
@@ -71,14 +72,11 @@ def _step_jacobian(z, model, config):
     return jax.jacfwd(lambda zz: gait_outputs(model, zz, config)[0])(z)
 
 
-_gait_outputs_jit = stored_jit(gait_outputs)
-
-
 def _implicit(model, z, config):
     # The general mechanism (`_implicit`): the fixed point and its outputs carry
     # implicit-function-theorem tangents, the step-map Jacobian its forward-over-forward
     # one; one `jax.jvp` along the slope gives every total derivative.
-    values = _gait_outputs_jit(model, z, config)
+    values = gait_outputs(model, z, config)
 
     def along(psi):
         m = model.with_slope(psi)

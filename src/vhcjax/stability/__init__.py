@@ -2,34 +2,38 @@
 Jacobian, period doubling, period-k orbits, bifurcation diagrams.
 """
 
+from ._bifurcation import (
+    BifurcationDiagram as BifurcationDiagram,
+    bifurcation_diagram as bifurcation_diagram,
+    detect_period as detect_period,
+    period_doubling_slopes_from_diagram as period_doubling_slopes_from_diagram,
+)
+from ._family import Family as Family, period1_family as period1_family
+from ._midswing import (
+    midswing_map as midswing_map,
+    midswing_multipliers as midswing_multipliers,
+    to_midswing as to_midswing,
+)
 from ._multipliers import (
     AGREEMENT_RTOL as AGREEMENT_RTOL,
     GAIT_TOL as GAIT_TOL,
     MAX_CONDITION as MAX_CONDITION,
-    SEEDS_3DEG as SEEDS_3DEG,
-    BifurcationDiagram as BifurcationDiagram,
-    Family as Family,
     GaitMultipliers as GaitMultipliers,
-    PeriodDoubling as PeriodDoubling,
-    PeriodKOrbit as PeriodKOrbit,
-    bifurcation_diagram as bifurcation_diagram,
-    detect_period as detect_period,
     family_multipliers as family_multipliers,
     finite_difference_jacobian as finite_difference_jacobian,
-    finite_difference_jacobian_jit as finite_difference_jacobian_jit,
     gait_multipliers as gait_multipliers,
-    gait_multipliers_jit as gait_multipliers_jit,
-    midswing_map as midswing_map,
-    midswing_multipliers as midswing_multipliers,
-    period1_family as period1_family,
+    returns_to as returns_to,
+    transverse_note as transverse_note,
+)
+from ._period_doubling import (
+    PeriodDoubling as PeriodDoubling,
     period2_branch as period2_branch,
     period_doubling_slope as period_doubling_slope,
-    period_doubling_slopes_from_diagram as period_doubling_slopes_from_diagram,
+)
+from ._period_k import (
+    PeriodKOrbit as PeriodKOrbit,
     period_k_orbit as period_k_orbit,
-    returns_to as returns_to,
     settle as settle,
-    to_midswing as to_midswing,
-    transverse_note as transverse_note,
 )
 from ._spectrum import GaitSpectrum as GaitSpectrum, gait_spectrum as gait_spectrum
 from ._transverse import (

@@ -1,22 +1,13 @@
-"""Stability of gaits: multipliers two ways, period doubling, period-k gaits, bifurcations.
+"""Floquet multipliers of a period-1 gait, two ways, with a check of each.
 
-- `gait_multipliers`: Floquet multipliers of a period-1 gait by the transverse
-  linearization (thesis ch. 6, `vhcjax.stability`) and, independently, as the
-  eigenvalues of the Poincare-map Jacobian by forward-mode autodiff through the
-  heel-strike events (`vhcjax.hybrid.jacobian`). Batched over slopes by `vmap`
-  (`family_multipliers`).
-- `midswing_multipliers`: the same multipliers on another Poincare section
-  ($q_1 = 0$ in mid-swing), a check that they do not depend on the section.
-- `period1_family`: the period-1 gaits over a range of slopes (continuation).
-- `period_doubling_slope`: where a multiplier of the stable family crosses $-1$
-  (secant/bisection on $\\det(I + J)$, which changes sign there).
-- `period_k_orbit`: fixed points of $P^k$ (k = 2, 4) with their multipliers.
-- `bifurcation_diagram`: Goswami et al. (1998) style: long batched simulations from
-  the period-1 gait, step periods of the last steps against slope, falls marked.
+`gait_multipliers` computes them by the transverse linearization (thesis ch. 6,
+`vhcjax.stability.transverse_linearization`) and, independently, as the eigenvalues of
+the Poincare-map Jacobian by forward-mode autodiff through the heel-strike events
+(`vhcjax.hybrid.jacobian`); `family_multipliers` batches them over slopes (`vmap`).
+`finite_difference_jacobian` is an autodiff-free check of the Jacobian.
 """
 
 import math
-import warnings
 
 import diffrax
 import equinox as eqx
@@ -24,40 +15,19 @@ import jax
 import jax.core
 import jax.numpy as jnp
 import numpy as np
-import optimistix as optx
 
-from .. import hybrid as _poincare
-from .._batching import MAX_DISPATCH, host_workers, padded_map
+from .._batching import padded_map
 from .._programs import stored_jit
-from .._results import RESULTS
-from ..hybrid import (
-    DEFAULT_CONFIG,
-    FAST_CONFIG,
-    check_map_steps,
-    check_section_shape,
-    flow,
-    ode_solver,
-    simulate,
-    solve_to_event,
-    step_map,
-    step_unchecked,
-)
-from ..models import CompassGait  # the default model (thesis Table 1) where none is given
+from .._results import RESULTS, result_names
+from ..hybrid import DEFAULT_CONFIG, flow, step_map, step_unchecked
 from ._transverse import TransverseLinearization, transverse_linearization
-
-#: Stable and unstable period-1 gaits of the default compass gait at 3 degrees
-#: (section coordinates $(q_1, \dot q_1, \dot q_2)$), e.g. Newton seeds for `fixed_point`.
-SEEDS_3DEG = {
-    "stable": (0.2186688, -1.09238359, -0.37737395),
-    "unstable": (0.20467554, -1.21057184, -0.71248882),
-}
 
 
 def _sort(ev):
+    """Eigenvalues by modulus, descending."""
     return ev[jnp.argsort(-jnp.abs(ev))]
 
 
-# ---- multipliers of one gait, two ways --------------------------------------------------
 class GaitMultipliers(eqx.Module):
     """Multipliers of a period-1 gait, by two methods, with a check of each.
 
@@ -169,9 +139,11 @@ def returns_to(z, z_next):
     return moved <= GAIT_TOL * jnp.maximum(1.0, jnp.max(jnp.abs(jnp.asarray(z))))
 
 
+@stored_jit
 def _gait_multipliers(model, z, config=DEFAULT_CONFIG, transverse=True):
     """Both multiplier computations at the period-1 gait with section coordinates `z`,
-    with the checks of the transverse one (`transverse=False`: the Poincare ones only)."""
+    with the checks of the transverse one (`transverse=False`: the Poincare ones only):
+    one stored program per model class (see `vhcjax._programs`)."""
     z = jnp.asarray(z, float)
     x0 = model.section_to_state(z)
 
@@ -289,7 +261,7 @@ def gait_multipliers(model, z, config=DEFAULT_CONFIG, *, transverse=True):
     traced = any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((model, z)))
     if hasattr(model, "psi"):  # an array leaf, also when set by hand (no compile per slope)
         model = model.with_slope(model.psi)
-    out = _gait_multipliers_jit(model, jnp.asarray(z, float), config, transverse)
+    out = _gait_multipliers(model, jnp.asarray(z, float), config, transverse)
     return out if traced else jax.device_get(out)
 
 
@@ -302,10 +274,7 @@ def _check_single_domain(model, transverse, name):
         )
 
 
-_gait_multipliers_jit = stored_jit(_gait_multipliers)
-gait_multipliers_jit = gait_multipliers
-
-
+@stored_jit
 def finite_difference_jacobian(model, z, k=1, h=1e-6, config=DEFAULT_CONFIG):
     """Central finite differences of $P^k$: an autodiff-free check of `jacobian`."""
     z = jnp.asarray(z, float)
@@ -320,510 +289,6 @@ def finite_difference_jacobian(model, z, k=1, h=1e-6, config=DEFAULT_CONFIG):
     return jax.vmap(col, out_axes=1)(eye)
 
 
-finite_difference_jacobian_jit = stored_jit(finite_difference_jacobian)
-
-
-# ---- a second Poincare section: q1 = 0 in mid-swing -------------------------------------
-def _gated_strike_event(model):
-    """Heel strike (downward guard crossing) once the strike gate is open, in one stage
-    (the flow may start with the gate already open)."""
-
-    def cond(t, y, args, **kwargs):
-        q = y[: model.n_dof]
-        # Negative while the gate is closed: opening it is then never a downward crossing,
-        # whatever the sign of the guard there (it is negative when the legs cross below
-        # the slope line, as for the unstable family).
-        return jnp.where(model.strike_gate(q) > 0, model.guard(q), -1.0 - jnp.abs(model.guard(q)))
-
-    return diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13), direction=False)
-
-
-def _midswing_event():
-    def cond(t, y, args, **kwargs):
-        return y[0]
-
-    return diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13), direction=False)
-
-
-def _flow_event(model, x0, event, config):
-    sol = solve_to_event(
-        model.vector_field,
-        (event.cond_fn,),
-        (event.direction,),
-        x0,
-        None,
-        0.0,
-        config.t_max_factor * model.time_scale,
-        solver=ode_solver(config.solver),
-        rtol=config.rtol,
-        atol=config.atol,
-        max_steps=config.max_steps,
-    )
-    ok = sol.result == diffrax.RESULTS.event_occurred
-    return sol.ys[-1], sol.ts[-1], ok
-
-
-def midswing_map(model, w, config=DEFAULT_CONFIG):
-    """Return map on the mid-swing section $\\{q_1 = 0, \\dot q_1 < 0\\}$ of a compass-gait
-    walker, coordinates $w = (q_2, \\dot q_1, \\dot q_2)$: swing to heel strike, impact,
-    swing to the next $q_1 = 0$. **Returns:** `(w_next, ok)`."""
-    x = jnp.concatenate([jnp.zeros(1, w.dtype), w])
-    xm, _, ok1 = _flow_event(model, x, _gated_strike_event(model), config)
-    xp, _, _ = model.impact(xm)
-    xs, _, ok2 = _flow_event(model, xp, _midswing_event(), config)
-    return xs[1:], ok1 & ok2
-
-
-def to_midswing(model, z, config=DEFAULT_CONFIG):
-    """Section coordinates on the mid-swing section of the orbit through post-impact `z`."""
-    xs, _, ok = _flow_event(model, model.section_to_state(z), _midswing_event(), config)
-    return xs[1:], ok
-
-
-@stored_jit
-def midswing_multipliers(model, z, config=DEFAULT_CONFIG):
-    """Multipliers of the gait through post-impact `z`, computed on the mid-swing section
-    $q_1 = 0$ (jacfwd of `midswing_map`). **Returns:** `(multipliers, w, ok)`."""
-    w, ok0 = to_midswing(model, z, config)
-    J = jax.jacfwd(lambda ww: midswing_map(model, ww, config)[0])(w)
-    _, ok = midswing_map(model, w, config)
-    return _sort(jnp.linalg.eigvals(J)), w, ok0 & ok
-
-
-# ---- the period-1 family over slopes ----------------------------------------------------
-_fixed_point_jit = _poincare.fixed_point_jit
-
-
-class Family(eqx.Module):
-    """Period-1 gaits along a slope range: `psi` (rad), `z` (B, 2n-1), `periods` (B,),
-    `result` (per slope)."""
-
-    psi: jax.Array
-    z: jax.Array
-    periods: jax.Array
-    result: RESULTS
-
-
-def period1_family(
-    psis,
-    family="stable",
-    *,
-    model=None,
-    method="auto",
-    coarse_step=math.radians(0.1),
-    seed=None,
-    seed_psi=None,
-    config=None,
-):
-    """Period-1 gaits of a compass-gait model at the slopes `psis` (rad).
-
-    The slope sweep of the gait search (`vhcjax.sweep`): the gait at 3 degrees by homotopy
-    from the reference model, a continuation over anchor slopes at most `coarse_step`
-    apart, then one batched Newton solve at every slope, missed slopes retried from
-    their neighbours. `method="auto"` (default) solves thesis Problem 1 and, at the
-    slopes where that fails for any reason, the fixed point of the Poincare map (thesis
-    Problem 2); `"vhc"` and `"shooting"` use one of them throughout.
-
-    `seed`, `seed_psi` and `config` are accepted for old calls and ignored (a warning):
-    the sweep needs no seed and solves every gait to 1e-12. A slope that is not finite
-    and positive (at least `vhcjax.gait.MIN_SLOPE`, 1e-6 rad) gets the code `bad_input`;
-    another model than a compass gait raises
-    `TypeError`.
-
-    **Returns:** a `Family`; `z` holds the section coordinates $(q_1, \\dot q_1,
-    \\dot q_2)$ after impact, `periods` the step periods, `result` the code per slope.
-    """
-    from ..gait import MIN_SLOPE, sweep
-
-    model = CompassGait() if model is None else model
-    if not isinstance(model, CompassGait):
-        raise TypeError(
-            "period1_family follows compass-gait families; for another model solve each "
-            "slope with vhcjax.fixed_point (it works under jax.vmap)"
-        )
-    given = (("seed", seed), ("seed_psi", seed_psi), ("config", config))
-    ignored = [k for k, v in given if v is not None]
-    if ignored:
-        warnings.warn(
-            f"period1_family: {', '.join(ignored)} ignored (the sweep needs no seed)",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-    psis = np.atleast_1d(np.asarray(psis, float))
-    # a slope that is not finite and positive (downhill), or below the sweep's smallest,
-    # is `bad_input`; the rest is solved
-    valid = np.isfinite(psis) & (psis >= MIN_SLOPE)
-    z = np.zeros((len(psis), 2 * model.n_dof - 1))
-    periods = np.zeros(len(psis))
-    codes = np.full(len(psis), int(RESULTS.bad_input._value), dtype=np.int32)
-    if valid.any():  # `"auto"`: the VHC search, shooting where it fails
-        g = sweep(model, psis[valid], family, method, anchor_step=coarse_step, tangents=False)
-        z[valid] = np.asarray(g.gaits.z)
-        periods[valid] = np.asarray(g.gaits.T)
-        codes[valid] = np.asarray(g.gaits.result._value)
-    result = eqx.tree_at(lambda r: r._value, RESULTS.successful, jnp.asarray(codes))
-    return Family(jnp.asarray(psis), jnp.asarray(z), jnp.asarray(periods), result)
-
-
-# ---- period doubling --------------------------------------------------------------------
-def _flip_function(model, psi, z0, config, k=1):
-    fp = _fixed_point_jit(model.with_slope(psi), jnp.asarray(z0), k, config=config)
-    J = _jacobian_jit(model.with_slope(psi), fp.z, k, config)
-    return float(jnp.linalg.det(jnp.eye(J.shape[0]) + J)), np.asarray(fp.z), fp.result
-
-
-_jacobian_jit = _poincare.jacobian_jit
-
-
-class PeriodDoubling(eqx.Module):
-    """A flip bifurcation: `psi` (rad), `z` (the period-1 gait there), `multipliers`
-    (Poincare, at `psi`; one of them is $-1$), `bracket` (rad), `iterations`."""
-
-    psi: float
-    z: np.ndarray
-    multipliers: np.ndarray
-    bracket: tuple
-    iterations: int
-
-
-def period_doubling_slope(
-    psi_lo,
-    psi_hi,
-    z_lo,
-    *,
-    model=None,
-    k=1,
-    tol=math.radians(1e-5),
-    config=DEFAULT_CONFIG,
-    max_iter=60,
-):
-    """Slope in `[psi_lo, psi_hi]` where a multiplier of the period-`k` gait crosses $-1$.
-
-    $f(\\psi) = \\det(I + J(\\psi))$ ($J$ the Jacobian of $P^k$ at the fixed point) is
-    smooth and changes sign where a real multiplier crosses $-1$; the root is found by
-    bisection safeguarded regula falsi (Illinois) to `tol` (default 1e-5 degrees),
-    continuing the fixed point from `z_lo` (a gait at `psi_lo`).
-    """
-    model = CompassGait() if model is None else model
-    fa, za, ra = _flip_function(model, psi_lo, z_lo, config, k)
-    fb, zb, rb = _flip_function(model, psi_hi, za, config, k)
-    if ra != RESULTS.successful or rb != RESULTS.successful:
-        raise ValueError("period_doubling_slope: no period-k gait at the bracket ends")
-    if not fa * fb < 0:
-        raise ValueError(f"no sign change of det(I+J) in [{psi_lo}, {psi_hi}]: {fa}, {fb}")
-    a, b = psi_lo, psi_hi
-    side = 0
-    it = 0
-    while b - a > tol and it < max_iter:
-        c = (a * fb - b * fa) / (fb - fa)
-        if not (a < c < b) or it % 3 == 2:
-            c = 0.5 * (a + b)
-        zc_guess = za + (zb - za) * (c - a) / (b - a)
-        fc, zc, res = _flip_function(model, c, zc_guess, config, k)
-        if fc * fb < 0:
-            a, fa, za = b, fb, zb
-            b, fb, zb = c, fc, zc
-            side = 0
-        else:
-            b, fb, zb = c, fc, zc
-            if side == 1:
-                fa *= 0.5
-            side = 1
-        if a > b:
-            a, b, fa, fb, za, zb = b, a, fb, fa, zb, za
-        it += 1
-    psi = 0.5 * (a + b)
-    _, z, _ = _flip_function(model, psi, za, config, k)
-    J = _jacobian_jit(model.with_slope(psi), jnp.asarray(z), k, config)
-    ev = np.asarray(_sort(jnp.linalg.eigvals(J)))
-    return PeriodDoubling(psi, z, ev, (a, b), it)
-
-
-# ---- period-k orbits ---------------------------------------------------------------------
-class PeriodKOrbit(eqx.Module):
-    """A fixed point of $P^k$: `z` (its first point), `orbit` (k, 2n-1) the k points,
-    `periods` (k,), `multipliers` of $P^k$ (Poincare, and by finite differences),
-    `residual`, `result`, `minimal_period` (the smallest j with $P^j(z) = z$)."""
-
-    z: np.ndarray
-    orbit: np.ndarray
-    periods: np.ndarray
-    multipliers: np.ndarray
-    multipliers_fd: np.ndarray
-    residual: float
-    result: RESULTS
-    minimal_period: int
-
-
-def settle(model, z0, num_steps=400, config=FAST_CONFIG):
-    """Post-impact section coordinates after `num_steps` steps from `z0` (None if the
-    walker fell): a seed for period-k searches on an attractor."""
-    sim = _simulate_jit(
-        model, model.section_to_state(jnp.asarray(z0, float)), num_steps, config=config
-    )
-    if sim.result != RESULTS.successful:
-        return None
-    return np.asarray(model.state_to_section(sim.steps.x_plus[-1]))
-
-
-_simulate_jit = simulate  # already jitted
-
-
-def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG, *, iterations=20, h=1e-6):
-    """Newton on $P^k(z) = z$ from `z0` (e.g. from `settle`), with multipliers of $P^k$
-    by autodiff and by central finite differences.
-
-    $P^k$ and its Jacobian are composed from $k$ one-step maps and one-step Jacobians
-    (autodiff through each heel strike): the compiled one-step programs serve every $k$.
-    Newton stops at a residual below 1e-12 (`successful`), after `iterations`
-    (`not_converged`), or at a failed step (its code; `residual` is then `inf`: the
-    failed map holds its state, which is no convergence). An invalid model is
-    `bad_input`, with zero periods and multipliers (nothing computed); a `k` that is not
-    a positive integer, or a `z0` of another shape, is a `ValueError`.
-    """
-    k = check_map_steps(k)
-    check_section_shape(model, jnp.asarray(z0), "z0")
-    if not bool(model.validate()):  # an invalid model takes no step: nothing computed
-        z = np.asarray(z0, float)
-        none = np.zeros(len(z), complex)
-        orbit = np.tile(z, (k, 1))
-        return PeriodKOrbit(z, orbit, np.zeros(k), none, none, np.inf, RESULTS.bad_input, k)
-
-    def Pk(z, jac):
-        J, orbit, periods, code = np.eye(len(z)), [], [], RESULTS.successful
-        for _ in range(k):
-            orbit.append(z)
-            if jac:
-                J = np.asarray(_jacobian_jit(model, jnp.asarray(z), 1, config)) @ J
-            r = _step_map_jit(model, jnp.asarray(z), 1, config)
-            periods.append(float(r.periods[0]))
-            if code == RESULTS.successful:
-                code = r.result
-            z = np.asarray(r.z_next)
-        return z, J, np.stack(orbit), np.asarray(periods), code
-
-    z = np.asarray(z0, float)
-    for _ in range(iterations):
-        zk, J, orbit, periods, code = Pk(z, True)
-        res = float(np.max(np.abs(zk - z)))
-        if code != RESULTS.successful or not np.isfinite(res) or res < 1e-12:
-            break
-        z = z - np.linalg.solve(J - np.eye(len(z)), zk - z)
-    else:
-        zk, J, orbit, periods, code = Pk(z, True)
-        res = float(np.max(np.abs(zk - z)))
-    if code == RESULTS.successful and not res < 1e-12:
-        code = RESULTS.not_converged
-    if code != RESULTS.successful and not code == RESULTS.not_converged:
-        res = float("inf")
-    eye = np.eye(len(z))
-    Jfd = np.stack(
-        [(Pk(z + h * e, False)[0] - Pk(z - h * e, False)[0]) / (2 * h) for e in eye], axis=1
-    )
-    minimal = k
-    for j in range(1, k):
-        if k % j == 0 and np.max(np.abs(orbit[j] - orbit[0])) < 1e-7:
-            minimal = j
-            break
-    return PeriodKOrbit(
-        z,
-        orbit,
-        periods,
-        np.asarray(_sort(jnp.linalg.eigvals(J))),
-        np.asarray(_sort(jnp.linalg.eigvals(Jfd))),
-        res,
-        code,
-        minimal,
-    )
-
-
-_step_map_jit = _poincare.step_map_jit
-
-
-# ---- bifurcation diagram ---------------------------------------------------------------
-class BifurcationDiagram(eqx.Module):
-    """Long simulations over slopes.
-
-    - `psi` (B,): slopes (rad).
-    - `periods` (B, num_record): step periods of the last `num_record` steps (NaN-free;
-      zero after a fall).
-    - `fell` (B,): the walker did not complete all steps.
-    - `result` (B,): first failure code per slope.
-    - `period_pattern` (B,): `detect_period` of the recorded step periods: 1, 2, 4, ...
-      steps per repetition, 0 if aperiodic (chaotic or not settled), -1 where it fell.
-    """
-
-    psi: np.ndarray
-    periods: np.ndarray
-    fell: np.ndarray
-    result: np.ndarray
-    period_pattern: np.ndarray
-
-
-@stored_jit
-def _long_runs(model, psis, x0s, num_steps, num_record, config):
-    def one(p, x0):
-        sim = simulate(model.with_slope(p), x0, num_steps, config=config)
-        return sim.steps.period[-num_record:], sim.result
-
-    return jax.vmap(one)(psis, x0s)
-
-
-def bifurcation_diagram(
-    psis,
-    zs,
-    *,
-    model=None,
-    num_transient=300,
-    num_record=64,
-    perturbation=1e-4,
-    config=FAST_CONFIG,
-    chunk=None,
-    mesh=None,
-):
-    """Simulate from the period-1 gaits `zs` at slopes `psis` (rad) for
-    `num_transient + num_record` steps (batched with `vmap`) and keep the step periods
-    of the last `num_record`.
-
-    The start is the gait plus `perturbation` on $\\dot q_2$, so that unstable period-1
-    gaits (past the flip) leave towards the attractor. Default tolerance: `FAST_CONFIG`
-    (rtol = atol = 1e-8). `chunk`: largest batch of one call (default: 256 when the
-    chunks run one per CPU core at a time, else the whole batch). The chunks are padded
-    (`_batching.padded_map`) and split over the devices of `mesh` (default: all local
-    devices).
-    """
-    model = CompassGait() if model is None else model
-    psis = np.asarray(psis, float).reshape(-1)
-    zs = np.asarray(zs, float)
-    if zs.ndim != 2 or len(zs) != len(psis):
-        raise ValueError(
-            f"bifurcation_diagram: one gait per slope: zs must have shape ({len(psis)}, n), "
-            f"got {zs.shape}"
-        )
-    if int(num_transient) < 0 or int(num_record) < 2:  # one period shows no pattern
-        raise ValueError(
-            "bifurcation_diagram: num_transient must be at least 0 and num_record at least 2, "
-            f"got {num_transient}, {num_record}"
-        )
-    x0s = np.stack(
-        [np.asarray(model.with_slope(p).section_to_state(jnp.asarray(z))) for p, z in zip(psis, zs)]
-    )
-    x0s[:, -1] += perturbation
-    steps = num_transient + num_record
-    p, r = padded_map(
-        lambda ps, xs: _long_runs(model, ps, xs, steps, num_record, config),
-        psis,
-        x0s,
-        # chunks of up to 256 run one per CPU core; a GPU takes the whole batch at once
-        max_chunk=chunk or (MAX_DISPATCH if host_workers(mesh) > 1 else len(psis)),
-        mesh=mesh,
-        stage="simulation",
-    )
-    periods, codes = np.asarray(p), np.asarray(r._value)
-    fell = codes != int(RESULTS.successful._value)
-    nd = np.array([-1 if f else detect_period(pp) for pp, f in zip(periods, fell)])
-    return BifurcationDiagram(psis, periods, fell, codes, nd)
-
-
-#: The periods (in steps) that `detect_period` looks for.
-PERIOD_CANDIDATES = (1, 2, 4, 8, 16, 32)
-
-
-def detect_period(periods, tol=1e-5, candidates=PERIOD_CANDIDATES):
-    """Smallest p in `candidates` with `periods[i + p] == periods[i]` (within `tol` s)
-    for all recorded i; 0 if none (aperiodic, e.g. chaotic, or not settled)."""
-    periods = np.asarray(periods)
-    for p in candidates:
-        if p < len(periods) and np.max(np.abs(periods[p:] - periods[:-p])) < tol:
-            return p
-    return 0
-
-
-def period_doubling_slopes_from_diagram(diagram):
-    """Slopes (rad) where the detected step-period pattern (`detect_period`) first reaches
-    2, 4, 8, ... (midpoints between neighbouring slopes), from a `BifurcationDiagram`: a
-    simulation-only estimate of the cascade, as coarse as the slope grid."""
-    per = np.asarray(diagram.period_pattern)
-    out = []
-    target = 2
-    for i in range(1, len(per)):
-        if per[i] >= target and 0 < per[i - 1] < target:
-            out.append(0.5 * (diagram.psi[i - 1] + diagram.psi[i]))
-            target *= 2
-    return out
-
-
-def period2_branch(model, pd, psis, config=DEFAULT_CONFIG, amplitudes=(3e-3, 1e-2, 3e-2)):
-    """Continue the period-2 gait born at the flip `pd` (a `PeriodDoubling`) over the
-    slopes `psis` (rad, increasing, all past the flip).
-
-    The first solve starts from the period-1 gait at the flip displaced along the flip
-    eigenvector (several trial amplitudes; a solution that is the period-1 gait again is
-    rejected), then secant continuation. Stops where Newton fails or the orbit collapses.
-    **Returns:** dict with `psi` (m,), `z` (m, 3), `periods` (m, 2), `max_abs` (m,) and
-    `stable` (m,) from the multipliers of $P^2$, and `flip_psi`: the slope where a
-    multiplier of $P^2$ crosses $-1$ (period 2 -> 4), located to 1e-5 degrees, or None.
-    """
-    psis = np.asarray(psis, float)
-    if len(psis) == 0:
-        return None
-    J = _jacobian_jit(model.with_slope(pd.psi), jnp.asarray(pd.z), 1, config)
-    ev, V = np.linalg.eig(np.asarray(J))
-    v = np.real(V[:, np.argmin(np.abs(ev + 1))])
-    v = v / np.linalg.norm(v)
-    out_psi, out_z, out_T, out_mx = [], [], [], []
-    zs = []
-    for i, p in enumerate(psis):
-        m = model.with_slope(p)
-        if i == 0:
-            trials = [pd.z + s * v for s in amplitudes]
-        else:
-            trials = [
-                zs[-1]
-                if len(zs) == 1
-                else zs[-1] + (zs[-1] - zs[-2]) * (p - out_psi[-1]) / (out_psi[-1] - out_psi[-2])
-            ]
-        found = None
-        for guess in trials:
-            fp = _fixed_point_jit(m, jnp.asarray(guess), 2, config=config)
-            if fp.result != RESULTS.successful:
-                continue
-            z1 = np.asarray(_step_map_jit(m, fp.z, 1, config).z_next)
-            if np.max(np.abs(z1 - np.asarray(fp.z))) > 1e-6:
-                found = fp
-                break
-        if found is None:
-            break
-        zs.append(np.asarray(found.z))
-        Jk = _jacobian_jit(m, found.z, 2, config)
-        out_psi.append(p)
-        out_z.append(zs[-1])
-        out_T.append(np.asarray(found.periods))
-        out_mx.append(float(np.max(np.abs(np.linalg.eigvals(np.asarray(Jk))))))
-    if not out_psi:
-        return None
-    mx = np.asarray(out_mx)
-    stable = mx < 1.0
-    flip = None
-    idx = np.where(stable[:-1] & ~stable[1:])[0]
-    if len(idx):
-        i = int(idx[0])
-        try:
-            flip = period_doubling_slope(
-                out_psi[i], out_psi[i + 1], out_z[i], model=model, k=2, config=config
-            ).psi
-        except ValueError:
-            flip = None
-    return {
-        "psi": np.asarray(out_psi),
-        "z": np.stack(out_z),
-        "periods": np.stack(out_T),
-        "max_abs": mx,
-        "stable": stable,
-        "flip_psi": flip,
-    }
-
-
 # ---- why the transverse multipliers are not used -------------------------------------
 def _pick(x, index):
     x = np.asarray(x)
@@ -833,8 +298,6 @@ def _pick(x, index):
 def transverse_note(gm, index=None):
     """`None` where the transverse multipliers of a (possibly batched, then `index`)
     `GaitMultipliers` hold; else a one-line reason they are not to be trusted."""
-    from .._results import result_names
-
     name = result_names(_pick(gm.transverse_result._value, index))
     if name == "successful":
         return None

@@ -224,6 +224,9 @@ def split_orbit_state(model, u):
     return theta, dtheta, phi, dphi
 
 
+# diffrax traces the field five times (initial step, solver state, step); jitted, the
+# later traces reuse the first one's jaxpr.
+@stored_jit
 def joint_vector_field(t, u, args):
     """$\\theta, \\dot\\theta$ by (6.10); $\\phi, \\phi'$ by (5.19) in $t$; $\\dot\\Phi = A\\Phi$."""
     model, E0 = args
@@ -238,11 +241,6 @@ def joint_vector_field(t, u, args):
     return jnp.concatenate(
         [jnp.stack([dtheta, ddtheta]), dphi * dtheta, ddphi * dtheta, (A @ Phi).reshape(-1)]
     )
-
-
-# diffrax traces the field five times (initial step, solver state, step); jitted, the
-# later traces reuse the first one's jaxpr.
-_joint_vector_field_jit = stored_jit(joint_vector_field)
 
 
 def transverse_linearization(
@@ -284,7 +282,7 @@ def transverse_linearization(
 
     event = diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13), direction=False)
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(_joint_vector_field_jit),
+        diffrax.ODETerm(joint_vector_field),
         diffrax.Tsit5(),
         t0=0.0,
         t1=2.0 * period,

@@ -1,0 +1,126 @@
+"""Bifurcation diagrams in the style of Goswami et al. (1998): long batched simulations
+from the period-1 gaits, the step periods of the last steps against slope, falls marked;
+the step-period pattern (1, 2, 4, ... steps) read from them."""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._batching import MAX_DISPATCH, host_workers, padded_map
+from .._programs import stored_jit
+from .._results import RESULTS
+from ..hybrid import FAST_CONFIG, simulate
+from ..models import CompassGait  # the default model (thesis Table 1) where none is given
+
+
+class BifurcationDiagram(eqx.Module):
+    """Long simulations over slopes.
+
+    - `psi` (B,): slopes (rad).
+    - `periods` (B, num_record): step periods of the last `num_record` steps (NaN-free;
+      zero after a fall).
+    - `fell` (B,): the walker did not complete all steps.
+    - `result` (B,): first failure code per slope.
+    - `period_pattern` (B,): `detect_period` of the recorded step periods: 1, 2, 4, ...
+      steps per repetition, 0 if aperiodic (chaotic or not settled), -1 where it fell.
+    """
+
+    psi: np.ndarray
+    periods: np.ndarray
+    fell: np.ndarray
+    result: np.ndarray
+    period_pattern: np.ndarray
+
+
+@stored_jit
+def _long_runs(model, psis, x0s, num_steps, num_record, config):
+    def one(p, x0):
+        sim = simulate(model.with_slope(p), x0, num_steps, config=config)
+        return sim.steps.period[-num_record:], sim.result
+
+    return jax.vmap(one)(psis, x0s)
+
+
+def bifurcation_diagram(
+    psis,
+    zs,
+    *,
+    model=None,
+    num_transient=300,
+    num_record=64,
+    perturbation=1e-4,
+    config=FAST_CONFIG,
+    chunk=None,
+    mesh=None,
+):
+    """Simulate from the period-1 gaits `zs` at slopes `psis` (rad) for
+    `num_transient + num_record` steps (batched with `vmap`) and keep the step periods
+    of the last `num_record`.
+
+    The start is the gait plus `perturbation` on $\\dot q_2$, so that unstable period-1
+    gaits (past the flip) leave towards the attractor. Default tolerance: `FAST_CONFIG`
+    (rtol = atol = 1e-8). `chunk`: largest batch of one call (default: 256 when the
+    chunks run one per CPU core at a time, else the whole batch). The chunks are padded
+    (`_batching.padded_map`) and split over the devices of `mesh` (default: all local
+    devices).
+    """
+    model = CompassGait() if model is None else model
+    psis = np.asarray(psis, float).reshape(-1)
+    zs = np.asarray(zs, float)
+    if zs.ndim != 2 or len(zs) != len(psis):
+        raise ValueError(
+            f"bifurcation_diagram: one gait per slope: zs must have shape ({len(psis)}, n), "
+            f"got {zs.shape}"
+        )
+    if int(num_transient) < 0 or int(num_record) < 2:  # one period shows no pattern
+        raise ValueError(
+            "bifurcation_diagram: num_transient must be at least 0 and num_record at least 2, "
+            f"got {num_transient}, {num_record}"
+        )
+    x0s = np.stack(
+        [np.asarray(model.with_slope(p).section_to_state(jnp.asarray(z))) for p, z in zip(psis, zs)]
+    )
+    x0s[:, -1] += perturbation
+    steps = num_transient + num_record
+    p, r = padded_map(
+        lambda ps, xs: _long_runs(model, ps, xs, steps, num_record, config),
+        psis,
+        x0s,
+        # chunks of up to 256 run one per CPU core; a GPU takes the whole batch at once
+        max_chunk=chunk or (MAX_DISPATCH if host_workers(mesh) > 1 else len(psis)),
+        mesh=mesh,
+        stage="simulation",
+    )
+    periods, codes = np.asarray(p), np.asarray(r._value)
+    fell = codes != int(RESULTS.successful._value)
+    nd = np.array([-1 if f else detect_period(pp) for pp, f in zip(periods, fell)])
+    return BifurcationDiagram(psis, periods, fell, codes, nd)
+
+
+#: The periods (in steps) that `detect_period` looks for.
+PERIOD_CANDIDATES = (1, 2, 4, 8, 16, 32)
+
+
+def detect_period(periods, tol=1e-5, candidates=PERIOD_CANDIDATES):
+    """Smallest p in `candidates` with `periods[i + p] == periods[i]` (within `tol` s)
+    for all recorded i; 0 if none (aperiodic, e.g. chaotic, or not settled)."""
+    periods = np.asarray(periods)
+    for p in candidates:
+        if p < len(periods) and np.max(np.abs(periods[p:] - periods[:-p])) < tol:
+            return p
+    return 0
+
+
+def period_doubling_slopes_from_diagram(diagram):
+    """Slopes (rad) where the detected step-period pattern (`detect_period`) first reaches
+    2, 4, 8, ... (midpoints between neighbouring slopes), from a `BifurcationDiagram`: a
+    simulation-only estimate of the cascade, as coarse as the slope grid."""
+    per = np.asarray(diagram.period_pattern)
+    out = []
+    target = 2
+    for i in range(1, len(per)):
+        if per[i] >= target and 0 < per[i - 1] < target:
+            out.append(0.5 * (diagram.psi[i - 1] + diagram.psi[i]))
+            target *= 2
+    return out

@@ -1,0 +1,77 @@
+"""A second Poincare section, $q_1 = 0$ in mid-swing: the multipliers of a gait computed
+there, a check that they do not depend on the section."""
+
+import diffrax
+import jax
+import jax.numpy as jnp
+import optimistix as optx
+
+from .._programs import stored_jit
+from ..hybrid import DEFAULT_CONFIG, ode_solver, solve_to_event
+from ._multipliers import _sort
+
+
+def _gated_strike_event(model):
+    """Heel strike (downward guard crossing) once the strike gate is open, in one stage
+    (the flow may start with the gate already open)."""
+
+    def cond(t, y, args, **kwargs):
+        q = y[: model.n_dof]
+        # Negative while the gate is closed: opening it is then never a downward crossing,
+        # whatever the sign of the guard there (it is negative when the legs cross below
+        # the slope line, as for the unstable family).
+        return jnp.where(model.strike_gate(q) > 0, model.guard(q), -1.0 - jnp.abs(model.guard(q)))
+
+    return diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13), direction=False)
+
+
+def _midswing_event():
+    def cond(t, y, args, **kwargs):
+        return y[0]
+
+    return diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13), direction=False)
+
+
+def _flow_event(model, x0, event, config):
+    sol = solve_to_event(
+        model.vector_field,
+        (event.cond_fn,),
+        (event.direction,),
+        x0,
+        None,
+        0.0,
+        config.t_max_factor * model.time_scale,
+        solver=ode_solver(config.solver),
+        rtol=config.rtol,
+        atol=config.atol,
+        max_steps=config.max_steps,
+    )
+    ok = sol.result == diffrax.RESULTS.event_occurred
+    return sol.ys[-1], sol.ts[-1], ok
+
+
+def midswing_map(model, w, config=DEFAULT_CONFIG):
+    """Return map on the mid-swing section $\\{q_1 = 0, \\dot q_1 < 0\\}$ of a compass-gait
+    walker, coordinates $w = (q_2, \\dot q_1, \\dot q_2)$: swing to heel strike, impact,
+    swing to the next $q_1 = 0$. **Returns:** `(w_next, ok)`."""
+    x = jnp.concatenate([jnp.zeros(1, w.dtype), w])
+    xm, _, ok1 = _flow_event(model, x, _gated_strike_event(model), config)
+    xp, _, _ = model.impact(xm)
+    xs, _, ok2 = _flow_event(model, xp, _midswing_event(), config)
+    return xs[1:], ok1 & ok2
+
+
+def to_midswing(model, z, config=DEFAULT_CONFIG):
+    """Section coordinates on the mid-swing section of the orbit through post-impact `z`."""
+    xs, _, ok = _flow_event(model, model.section_to_state(z), _midswing_event(), config)
+    return xs[1:], ok
+
+
+@stored_jit
+def midswing_multipliers(model, z, config=DEFAULT_CONFIG):
+    """Multipliers of the gait through post-impact `z`, computed on the mid-swing section
+    $q_1 = 0$ (jacfwd of `midswing_map`). **Returns:** `(multipliers, w, ok)`."""
+    w, ok0 = to_midswing(model, z, config)
+    J = jax.jacfwd(lambda ww: midswing_map(model, ww, config)[0])(w)
+    _, ok = midswing_map(model, w, config)
+    return _sort(jnp.linalg.eigvals(J)), w, ok0 & ok
