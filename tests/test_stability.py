@@ -289,12 +289,8 @@ def test_period1_family_is_the_poincare_fixed_point_at_every_slope(gaits3):
         assert float(jnp.max(jnp.abs(out.z_next - z))) < vhcjax.gait.SUCCESS_TOL
     with pytest.raises(TypeError, match="compass-gait"):
         vhcjax.period1_family([PSI3], model=vhcjax.KneedWalker())
-    # a slope that is not finite and positive is coded, the others solved; an old seed
-    # (an array) is ignored with a warning
-    with pytest.warns(DeprecationWarning, match="seed"):
-        fam = vhcjax.period1_family(
-            np.radians([3.0, -1.0, np.nan]), "stable", seed=np.asarray(ref["stable"][0])
-        )
+    # a slope that is not finite and positive is coded, the others solved
+    fam = vhcjax.period1_family(np.radians([3.0, -1.0, np.nan]), "stable")
     assert vhcjax.result_names(fam.result) == ["successful", "bad_input", "bad_input"]
     np.testing.assert_allclose(np.asarray(fam.z)[0], ref["stable"][0], atol=1e-10)
     assert np.isfinite(np.asarray(fam.z)).all() and np.isfinite(np.asarray(fam.periods)).all()

@@ -188,7 +188,6 @@ def number(kind=float, *, lo=None, hi=None, lo_open=False, hi_open=False):
 
 FINITE = number(float)
 POSITIVE = number(float, lo=0.0, lo_open=True)
-NONNEGATIVE = number(float, lo=0.0)
 #: Largest magnitude of a state entry on the command line (rad, rad/s): far beyond any
 #: walking motion, and a bound that keeps the integrators' arithmetic finite.
 MAX_STATE = 1e3

@@ -46,14 +46,11 @@ from ._sweep import (
 )
 from ._vhc import (
     constraint as constraint,
-    integral_I as integral_I,
     phi_second_derivative as phi_second_derivative,
-    phi_vector_field as phi_vector_field,
     reduced_coefficients as reduced_coefficients,
     reduced_energy as reduced_energy,
     reduced_mass as reduced_mass,
     singularity_terms as singularity_terms,
-    theta_dot_squared as theta_dot_squared,
     theta_dynamics_coefficients as theta_dynamics_coefficients,
 )
 from ._vhc_n import (

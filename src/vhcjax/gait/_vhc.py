@@ -59,12 +59,6 @@ def reduced_energy(model, theta, dtheta, phi, dphi):
     return 0.5 * reduced_mass(model, theta, phi, dphi) * dtheta**2 + model.potential_energy(q)
 
 
-def theta_dot_squared(model, E0, theta, phi, dphi):
-    """$\\dot\\theta^2$ from the energy relation (thesis 5.18)."""
-    q, dPhi = constraint(theta, phi, dphi)
-    return _theta_dot_squared(model, E0, q, dPhi @ mech.mass_matrix(model, q) @ dPhi)
-
-
 def _theta_dot_squared(model, E0, q, M_theta):
     return 2.0 * (E0 - model.potential_energy(q)) / M_theta
 
@@ -105,18 +99,6 @@ def singularity_terms(model, E0, theta, phi, dphi):
     return dtheta_sq, mech.det_small(A) / jnp.where(scale > 0, scale, 1.0)
 
 
-def phi_vector_field(theta, y, args):
-    """diffrax vector field in the time-like variable $\\theta$: `y = (phi, dphi)`.
-
-    `args = (model, E0)`. Thesis (5.19) for n = 2.
-    """
-    model, E0 = args
-    k = y.shape[0] // 2
-    phi, dphi = y[:k], y[k:]
-    ddphi, _, _, _ = phi_second_derivative(model, E0, theta, phi, dphi)
-    return jnp.concatenate([dphi, ddphi])
-
-
 def theta_dynamics_coefficients(model, theta, phi, dphi):
     """Scalar reduced dynamics $\\alpha_0\\ddot\\theta + \\beta_0\\dot\\theta^2 + \\gamma_0 = 0$ free of $\\phi''$.
 
@@ -130,39 +112,3 @@ def theta_dynamics_coefficients(model, theta, phi, dphi):
     beta0 = w @ mech.coriolis_product(model, q, dPhi)
     gamma0 = w @ mech.gravity_vector(model, q)
     return jnp.ones_like(beta0), beta0, gamma0
-
-
-def integral_I(alpha_beta_gamma, theta, dtheta, theta0, dtheta0, num=64):
-    """The integral function $I(\\theta, \\dot\\theta, \\theta_0, \\dot\\theta_0)$ of thesis (2.52)-(2.53).
-
-    `alpha_beta_gamma(s) -> (alpha, beta, gamma)` gives the scalar reduced dynamics along
-    the orbit. The nested integrals are evaluated with Gauss-Legendre quadrature of
-    order `num` on $[\\theta_0, \\theta]$ (smooth integrands), zero on solutions of the
-    reduced dynamics.
-    """
-    nodes, weights = _gauss_legendre(num)
-    half = 0.5 * (theta - theta0)
-    mid = 0.5 * (theta + theta0)
-
-    def ratio(s):
-        al, be, ga = alpha_beta_gamma(s)
-        return be / al, ga / al
-
-    # log psi(x, theta0) = -2 int_{theta0}^x beta/alpha: inner integral on a sub-grid.
-    def log_psi(x):
-        h = 0.5 * (x - theta0)
-        m = 0.5 * (x + theta0)
-        vals = jax.vmap(lambda s: ratio(s)[0])(m + h * nodes)
-        return -2.0 * h * jnp.sum(weights * vals)
-
-    s = mid + half * nodes
-    inner = jax.vmap(lambda si: jnp.exp(-log_psi(si)) * 2.0 * ratio(si)[1])(s)
-    J = half * jnp.sum(weights * inner)
-    return dtheta**2 - jnp.exp(log_psi(theta)) * (dtheta0**2 - J)
-
-
-def _gauss_legendre(num):
-    import numpy as np
-
-    x, w = np.polynomial.legendre.leggauss(num)
-    return jnp.asarray(x), jnp.asarray(w)

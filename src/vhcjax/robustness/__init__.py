@@ -4,7 +4,6 @@ sensitivity, pushes at the hip.
 
 from ._basin import (
     BASIN_CONFIG as BASIN_CONFIG,
-    SECTION_NAMES as SECTION_NAMES,
     BasinSlice as BasinSlice,
     BasinVolume as BasinVolume,
     axis_directions as axis_directions,

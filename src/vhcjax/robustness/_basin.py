@@ -24,7 +24,6 @@ from ._bisection import bisect_threshold
 from ._gait_check import require_gait
 from ._recovery import CONVERGED, recover
 
-SECTION_NAMES = ("q1", "dq1", "dq2")
 BASIN_CONFIG = FAST_CONFIG
 """Swing integration used for basin maps: Tsit5, rtol = atol = 1e-8 (`FAST_CONFIG`)."""
 

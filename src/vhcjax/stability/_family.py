@@ -1,7 +1,6 @@
 """The period-1 gaits of a compass-gait model over a range of slopes (the slope sweep)."""
 
 import math
-import warnings
 
 import equinox as eqx
 import jax
@@ -29,9 +28,6 @@ def period1_family(
     model=None,
     method="auto",
     coarse_step=math.radians(0.1),
-    seed=None,
-    seed_psi=None,
-    config=None,
 ):
     """Period-1 gaits of a compass-gait model at the slopes `psis` (rad).
 
@@ -42,11 +38,9 @@ def period1_family(
     slopes where that fails for any reason, the fixed point of the Poincare map (thesis
     Problem 2); `"vhc"` and `"shooting"` use one of them throughout.
 
-    `seed`, `seed_psi` and `config` are accepted for old calls and ignored (a warning):
-    the sweep needs no seed and solves every gait to 1e-12. A slope that is not finite
+    The sweep needs no seed and solves every gait to 1e-12. A slope that is not finite
     and positive (at least `vhcjax.gait.MIN_SLOPE`, 1e-6 rad) gets the code `bad_input`;
-    another model than a compass gait raises
-    `TypeError`.
+    another model than a compass gait raises `TypeError`.
 
     **Returns:** a `Family`; `z` holds the section coordinates $(q_1, \\dot q_1,
     \\dot q_2)$ after impact, `periods` the step periods, `result` the code per slope.
@@ -58,14 +52,6 @@ def period1_family(
         raise TypeError(
             "period1_family follows compass-gait families; for another model solve each "
             "slope with vhcjax.fixed_point (it works under jax.vmap)"
-        )
-    given = (("seed", seed), ("seed_psi", seed_psi), ("config", config))
-    ignored = [k for k, v in given if v is not None]
-    if ignored:
-        warnings.warn(
-            f"period1_family: {', '.join(ignored)} ignored (the sweep needs no seed)",
-            DeprecationWarning,
-            stacklevel=2,
         )
     psis = np.atleast_1d(np.asarray(psis, float))
     # a slope that is not finite and positive (downhill), or below the sweep's smallest,
