@@ -118,7 +118,7 @@ def main(argv=None):
             g = run()
             times.append(time.perf_counter() - t0)
         t_run = min(times)
-        ok = np.asarray(g.result._value == vj.RESULTS.successful._value)
+        ok = np.asarray(g.result == vj.RESULTS.successful)
         # scipy on a subset
         n_sp = min(B, args.scipy_max)
         t0 = time.perf_counter()

@@ -63,7 +63,7 @@ def main(argv=None):
     import jax
     import jax.numpy as jnp
 
-    from vhcjax import CompassGait, stability as S
+    from vhcjax import RESULTS, CompassGait, stability as S
 
     psis = np.radians(np.linspace(args.lo, args.hi, args.slopes))
     t0 = time.perf_counter()
@@ -84,7 +84,7 @@ def main(argv=None):
         times.append(time.perf_counter() - t0)
     t_run = min(times)
     tr, pc = np.asarray(out.transverse), np.asarray(out.poincare)
-    ok = np.asarray(out.result._value) == 0
+    ok = np.asarray(out.result == RESULTS.successful)
     diff_tp = max(_match(a, b) for a, b in zip(tr[ok], pc[ok]))
 
     idx = np.linspace(0, args.slopes - 1, min(args.scipy_slopes, args.slopes)).astype(int)

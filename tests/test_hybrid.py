@@ -25,7 +25,7 @@ GAIT_PERIOD = 0.73434639  # measured; checked below against the scipy reference
 
 
 def ok(result):
-    return np.asarray(vj.result_codes(result)) == vj.RESULTS.successful._value
+    return np.asarray(result == vj.RESULTS.successful)
 
 
 # ---- heel-strike time ------------------------------------------------------------------

@@ -66,7 +66,7 @@ def test_a_hyperextended_knee_is_not_a_start(kw, gait):
 
 def test_energy_conserved_within_each_phase_and_lost_at_impacts(kw, gait):
     ts, xs, info = trajectory_jit(kw, gait.x0, 40)
-    assert np.all(np.asarray(info.result._value) == RESULTS.successful._value)
+    assert np.all(np.asarray(info.result == RESULTS.successful))
     energy = jax.vmap(jax.vmap(kw.energy))(xs)
     for i in range(2):
         assert np.ptp(np.asarray(energy[i])) < 1e-8, i
@@ -184,7 +184,7 @@ def test_slope_range_by_continuation(kw, gait):
     x0 = model.section_to_state(z + jnp.array([1e-6, 0.0, 0.0]))
     sim = vhcjax.simulate(model, x0, 100)
     zs = jax.vmap(model.state_to_section)(sim.steps.x_plus)
-    ok = np.asarray(sim.steps.result._value) == RESULTS.successful._value
+    ok = np.asarray(sim.steps.result == RESULTS.successful)
     dist = np.max(np.abs(np.asarray(zs) - np.asarray(z)), axis=1)
     assert dist[0] < 1e-4  # starts next to the gait ...
     assert not ok.all() or dist.max() > 1e-3  # ... and leaves it

@@ -31,7 +31,7 @@ SCRIPT = textwrap.dedent(
 
     def run(psi):
         sim = vj.simulate(vj.CompassGait(psi=psi), x0, 3, config=vj.FAST_CONFIG)
-        return sim.steps.period, sim.steps.x_plus, sim.result._value
+        return sim.steps.period, sim.steps.x_plus, vj.result_codes(sim.result)
 
     run_many = jax.jit(jax.vmap(run))
     devices_seen = []
@@ -74,7 +74,7 @@ SCRIPT = textwrap.dedent(
     s4 = vj.simulate_batch(m, X, 3, config=vj.FAST_CONFIG)
     s1 = vj.simulate_batch(m, X, 3, config=vj.FAST_CONFIG, mesh=default_mesh(jax.devices()[:1]))
     same(s4.steps.x_plus, s1.steps.x_plus)
-    same(s4.result._value, s1.result._value)
+    same(vj.result_codes(s4.result), vj.result_codes(s1.result))
     single = vj.simulate(m, X[4], 3, config=vj.FAST_CONFIG)
     same(s4.steps.x_plus[4], single.steps.x_plus)
     print("SIMULATE OK", s4.steps.period.shape)
@@ -83,7 +83,7 @@ SCRIPT = textwrap.dedent(
     # fixed point of the hybrid simulation (an independent computation)
     seeds = jnp.array([[0.21, -1.06, -0.45], [0.22, -1.09, -0.38], [0.22, -1.12, -0.3]])
     g = vj.find_gaits(m, seeds, psi=psis, method="shooting")
-    assert np.all(np.asarray(g.result._value) == vj.RESULTS.successful._value)
+    assert np.all(np.asarray(g.result == vj.RESULTS.successful))
     x_star = jnp.stack([g.a, -g.a - 2 * jnp.asarray(psis), g.b, g.f], axis=1)
     ret = [vj.simulate_batch(vj.CompassGait(psi=p), x_star[i:i + 1], 1).steps.x_plus[0, 0]
            for i, p in enumerate(psis)]

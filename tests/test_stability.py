@@ -214,6 +214,7 @@ def test_cli_bifurcation_simulates_only_where_there_is_a_gait(tmp_path, capsys, 
     one line saying so (an incomplete answer)."""
     import equinox as eqx
 
+    from vhcjax._results import results_from_codes
     from vhcjax.cli import main
 
     real = S.period1_family
@@ -221,8 +222,10 @@ def test_cli_bifurcation_simulates_only_where_there_is_a_gait(tmp_path, capsys, 
     def missing_at_3(psis, family="stable", **kwargs):
         fam = real(psis, family, **kwargs)
         at3 = jnp.abs(jnp.asarray(psis) - PSI3) < 1e-9
-        code = jnp.where(at3, vhcjax.RESULTS.not_converged._value, fam.result._value)
-        return eqx.tree_at(lambda f: f.result._value, fam, code)
+        codes = jnp.where(
+            at3, vhcjax.result_codes(vhcjax.RESULTS.not_converged), vhcjax.result_codes(fam.result)
+        )
+        return eqx.tree_at(lambda f: f.result, fam, results_from_codes(codes))
 
     monkeypatch.setattr(vhcjax.stability, "period1_family", missing_at_3)
     csv = tmp_path / "b.csv"

@@ -1,6 +1,9 @@
 """Result codes carried by every returned pytree (diffrax/optimistix style)."""
 
 import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
 
 
 class RESULTS(eqx.Enumeration):
@@ -73,21 +76,30 @@ class RESULTS(eqx.Enumeration):
     )
 
 
+_Item = type(RESULTS.successful)  # the class of the items (and of batches of them)
+
+
 def result_names(result) -> list[str] | str:
     """Names of result codes (outside `jit`): `'successful'`, `'fell'`, ...
 
     Accepts a `RESULTS` item (possibly batched) or an integer array of codes; returns a
     string for a scalar and a (nested) list of strings for a batch.
     """
-    import numpy as np
-
-    codes = np.asarray(result._value if hasattr(result, "_value") else result)
-    lookup = {int(item._value): name for name, item in RESULTS._name_to_item.items()}
+    codes = np.asarray(result_codes(result))
+    lookup = {int(result_codes(item)): name for name, item in RESULTS._name_to_item.items()}
     if codes.ndim == 0:
         return lookup[int(codes)]
     return np.vectorize(lambda c: lookup[int(c)], otypes=[object])(codes).tolist()
 
 
-def result_codes(result):
-    """The integer codes of a (batched) `RESULTS` item, as an array."""
-    return result._value if hasattr(result, "_value") else result
+def result_codes(result) -> jax.Array | np.ndarray:
+    """The integer codes of a (batched) `RESULTS` item, as an array (an array of codes is
+    returned as it is). Traceable."""
+    return result._value if isinstance(result, _Item) else result
+
+
+def results_from_codes(codes) -> RESULTS:
+    """The (batched) `RESULTS` item whose integer codes are `codes`: the inverse of
+    `result_codes`. Traceable."""
+    codes = jnp.asarray(codes, dtype=np.asarray(result_codes(RESULTS.successful)).dtype)
+    return eqx.tree_at(result_codes, RESULTS.successful, codes)

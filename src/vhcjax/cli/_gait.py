@@ -315,10 +315,10 @@ def sweep_rows(gaits, slopes_deg):
     import jax
     import numpy as np
 
-    from .._results import result_names
+    from .._results import result_codes, result_names
 
     g = jax.device_get(gaits)  # one transfer, then plain numpy per row
-    names = result_names(np.atleast_1d(g.result._value))
+    names = result_names(np.atleast_1d(result_codes(g.result)))
     cols = {k: np.atleast_1d(np.asarray(getattr(g, k), float)) for k in NUMBER_KEYS}
     by = np.atleast_1d(np.asarray(g.shooting))
     rows = []

@@ -47,7 +47,7 @@ def stability_json(gm, index=None) -> dict[str, Any]:
     if note:
         out["multipliers_reason"] = note
     # multipliers not used for a reason other than their disagreement: theirs says nothing
-    code = result_names(gm.transverse_result._value)
+    code = result_names(gm.transverse_result)
     unused = note is not None and code != "methods_disagree"
     dis = None if gm.disagreement is None or unused else float(gm.disagreement)
     out.update(
@@ -77,15 +77,17 @@ def add_stability_columns(model, gaits, psis, rows, transverse=False):
     times slower); rows whose gait failed get empty values."""
     import jax
     import jax.numpy as jnp
+    import numpy as np
 
-    from .._results import result_names
+    from .._results import RESULTS, result_names
     from ..stability import family_multipliers
 
     z = jax.vmap(model.state_to_section)(jnp.asarray(gaits.x_plus))
     gm = _host(family_multipliers(model, jnp.asarray(psis, float), z, transverse=transverse), None)
-    codes = result_names(gm.transverse_result._value)
+    codes = result_names(gm.transverse_result)
+    gait_ok = np.asarray(gm.result == RESULTS.successful)
     for i, row in enumerate(rows):
-        if not (gm.result._value[i] == 0 and row.get("result") == "successful"):
+        if not (gait_ok[i] and row.get("result") == "successful"):
             row.update(dict.fromkeys(CSV_COLUMNS, ""))
             continue
         trusted = codes[i] == "successful"

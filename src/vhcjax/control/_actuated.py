@@ -231,7 +231,7 @@ def simulate_closed_loop(
 
     init = (x0, jnp.asarray(True), RESULTS.successful)
     (_, _, first_fail), (steps, umax, urms) = jax.lax.scan(body, init, None, length=num_steps)
-    num_ok = jnp.sum(steps.result._value == RESULTS.successful._value)
+    num_ok = jnp.sum(steps.result == RESULTS.successful)
     return ClosedLoopSimulation(steps, first_fail, num_ok, x0, umax, urms)
 
 

@@ -28,7 +28,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._programs import stored_jit
-from .._results import RESULTS
+from .._results import RESULTS, result_codes, results_from_codes
 from ..hybrid import SolverConfig, check_state_shape, multidomain_step
 from ..stability import GAIT_TOL, guard_normal
 from ._actuated import actuated_vector_field, is_multidomain, num_inputs
@@ -364,7 +364,7 @@ def _hybrid_transverse_system(model, x_plus, num_points):
     sizes = [x_plus.shape[0] - 1 if P is None else P.shape[1] for P in bases]
     k = int(np.argmin(sizes))
     # the passive cycle's first failure (e.g. a state that is not on a gait)
-    code = eqx.tree_at(lambda c: c._value, RESULTS.successful, info.result._value[-1])
+    code = results_from_codes(result_codes(info.result)[-1])
     for d in domains:
         code = RESULTS.where(code == RESULTS.successful, d.result, code)
     M = cycle_monodromy(

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 
 from .._batching import report
 from .._programs import stored_jit
-from .._results import RESULTS
+from .._results import RESULTS, result_codes
 from ._dispatch import _check, _relabel, _search
 from ._gait import family_sign, gait_in_units, section_in_units
 from ._problem1 import vhc_residual
@@ -158,9 +158,9 @@ def _run_continuation(start, end, s_values, z0, sign, method):
         gaits = jax.tree_util.tree_map(lambda x: x[skip:k], jax.device_get(out))
         parts.append(gaits)
         # the last two successes so far carry the secant line into the next call
-        code = np.asarray(gaits.result._value)
+        code = np.asarray(result_codes(gaits.result))
         ok = np.flatnonzero(
-            (code == RESULTS.successful._value) | (code == RESULTS.other_cycle._value)
+            (code == result_codes(RESULTS.successful)) | (code == result_codes(RESULTS.other_cycle))
         )
         solved = [(s_prev, z_prev), (s_start, z_start)] + [
             (new[i], np.asarray(_unknowns(jax.tree_util.tree_map(lambda x: x[i], gaits), method)))

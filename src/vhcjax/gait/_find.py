@@ -11,7 +11,7 @@ import numpy as np
 
 from .._batching import bucket_size, device_multiple, dispatch_size, host_workers, padded_map
 from .._programs import stored_jit
-from .._results import RESULTS
+from .._results import RESULTS, result_codes
 from ..hybrid import check_section_shape
 from ..solvers import detach
 from ._continuation import (
@@ -96,8 +96,11 @@ def find_gait(model, family="stable", method="auto", guess=None, *, solver="newt
         methods = ("vhc", "shooting") if method == "auto" else (method,)
         gait = _compass_gait(model, family, methods[0], guess, solver)
         for m in methods[1:]:
-            code = gait.result._value
-            done = (RESULTS.successful._value, RESULTS.bad_input._value)  # nothing to retry
+            code = result_codes(gait.result)
+            done = (
+                result_codes(RESULTS.successful),
+                result_codes(RESULTS.bad_input),
+            )  # nothing to retry
             if not isinstance(code, jax.core.Tracer) and code in done:
                 break
             gait = _prefer(gait, _compass_gait(model, family, m, guess, solver))
@@ -415,14 +418,15 @@ def _find_in_units(model, guesses, family, method, solver, mesh, chord, far):
     first = "vhc" if method == "auto" else method
     gaits = _find_gaits(own, guesses, family, first, solver, mesh, chord, far)
     if method == "auto":
-        code = gaits.result._value
+        code = result_codes(gaits.result)
         if isinstance(code, jax.core.Tracer):
             redo = _find_gaits(own, guesses, family, "shooting", solver, mesh, chord, far)
             gaits = _prefer(gaits, redo)
         else:
             code = np.asarray(code)  # bad input is no failure of the VHC search
             idx = np.flatnonzero(
-                (code != RESULTS.successful._value) & (code != RESULTS.bad_input._value)
+                (code != result_codes(RESULTS.successful))
+                & (code != result_codes(RESULTS.bad_input))
             )
             if idx.size:
                 sub = _members(own, B, idx)  # a shared model stays shared
@@ -499,7 +503,7 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord, far=None):
 
     gaits = padded_map(search, batched, guesses, max_chunk=chunk, mesh=mesh, stage="gait search")
     gaits = _relabel(gaits, family)
-    concrete = not isinstance(gaits.result._value, jax.core.Tracer)  # not under `jit`
+    concrete = not isinstance(result_codes(gaits.result), jax.core.Tracer)  # not under `jit`
     if chord and guesses is not None and concrete:
         gaits = _redo_without_chord(gaits, batched, shared, family, method, solver, mesh, far)
     return _clean_failed(gaits, guesses, B)
@@ -510,9 +514,10 @@ def _redo_without_chord(gaits, batched, shared, family, method, solver, mesh, fa
     again, with Newton steps, from where they stopped: a residual that rounds above
     `SUCCESS_TOL` needs Newton's error estimate to be accepted, and the
     chord steps' Jacobian is too old to give one. (Host-side: not under `jit`.)"""
-    code = np.asarray(gaits.result._value)
+    code = np.asarray(result_codes(gaits.result))
     redo = np.flatnonzero(
-        (code == RESULTS.not_converged._value) & (np.asarray(gaits.residual) < _NOISY_RESIDUAL)
+        (code == result_codes(RESULTS.not_converged))
+        & (np.asarray(gaits.residual) < _NOISY_RESIDUAL)
     )
     if redo.size == 0:
         return gaits

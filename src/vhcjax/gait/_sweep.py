@@ -15,7 +15,7 @@ import jax.numpy as jnp
 
 from .._batching import padded_map
 from .._programs import stored_jit
-from .._results import RESULTS
+from .._results import RESULTS, result_codes
 from ._continuation import _run_continuation, _tangent, _unknowns, continue_to_model
 from ._dispatch import _check, _relabel, vhc_applies
 from ._find import _gaits_in_units, _prefer, find_gaits
@@ -251,7 +251,7 @@ def sweep(model, slopes, family="stable", method="auto", *, anchor_step=ANCHOR_S
     first = "vhc" if method == "auto" else method
     gaits, tangent, edge_tangent = _sweep(own, psi, family, first, anchor_step, tangents)
     if method == "auto":
-        miss = np.flatnonzero(np.asarray(gaits.result._value) != RESULTS.successful._value)
+        miss = np.flatnonzero(np.asarray(gaits.result != RESULTS.successful))
         if miss.size:
             g2, t2, e2 = _sweep(own, psi[miss], family, "shooting", anchor_step, tangents)
             gaits = dataclasses.replace(gaits, method="auto")
@@ -305,7 +305,7 @@ def _sweep(model, psi, family, method, anchor_step, tangents):
         _anchor_grid(p0, min(ps[0], p0), anchor_step),
     ):
         g = _run_continuation(anchor_model, end, np.log(grid / p0), z0, sign, method)
-        ok = np.asarray(g.result._value) == RESULTS.successful._value
+        ok = np.asarray(g.result == RESULTS.successful)
         # A sequential continuation past a failure is unreliable: keep the run up to it.
         n_ok = len(ok) if ok.all() else int(np.argmin(ok))
         z = np.asarray(jax.vmap(lambda gg: _unknowns(gg, method))(g))
@@ -330,7 +330,7 @@ def _sweep(model, psi, family, method, anchor_step, tangents):
         gaits, tangent, have = _other_root(model, ps, gaits, tangent, have, family, method)
     # 6. the tangents still wanted: all of them, or those next to a missed slope (a fold?)
     # in the order of the slopes or in the order given (`ends()` looks there)
-    ok = np.asarray(gaits.result._value) == RESULTS.successful._value
+    ok = np.asarray(gaits.result == RESULTS.successful)
     inverse = np.empty_like(order)
     inverse[order] = np.arange(len(order))
     edge = _edges(ok) | _edges(ok[inverse])[order]
@@ -364,7 +364,7 @@ def _retry(model, ps, gaits, family, method, sign, reach, all_tangents=True):
 
     unknowns = jax.vmap(lambda g: _unknowns(g, method))
     Z = np.array(unknowns(gaits))
-    ok = np.asarray(gaits.result._value) == RESULTS.successful._value
+    ok = np.asarray(gaits.result == RESULTS.successful)
     T = np.zeros_like(Z)
     have = ok.copy() if all_tangents else np.zeros_like(ok)
     if all_tangents and ok.any():
@@ -388,11 +388,11 @@ def _retry(model, ps, gaits, family, method, sign, reach, all_tangents=True):
         again = find_gaits(
             model, jnp.asarray(guess), family, method, psi=jnp.asarray(ps[miss]), far=math.inf
         )
-        found = np.asarray(again.result._value) == RESULTS.successful._value
+        found = np.asarray(again.result == RESULTS.successful)
         # a landing on the other root is kept too: `_other_root` reads passages from it
-        code = np.asarray(gaits.result._value)
-        other = (np.asarray(again.result._value) == RESULTS.other_cycle._value) & (
-            code[miss] != RESULTS.other_cycle._value
+        code = np.asarray(result_codes(gaits.result))
+        other = (np.asarray(again.result == RESULTS.other_cycle)) & (
+            code[miss] != result_codes(RESULTS.other_cycle)
         )
         if other.any():
             take, rows = miss[other], np.where(other)[0]
@@ -455,7 +455,7 @@ def _other_root(model, ps, gaits, T, have, family, method):
     gaits, and the tangents and where they were computed (as `_retry`)."""
     import numpy as np
 
-    ok = np.asarray(gaits.result._value) == RESULTS.successful._value
+    ok = np.asarray(gaits.result == RESULTS.successful)
     n = len(ok)
     runs, near = [], []  # the missed slopes beyond each found gait next to a miss
     for j in np.where(_edges(ok))[0]:
@@ -502,7 +502,7 @@ def _other_root(model, ps, gaits, T, have, family, method):
     step = T[start] * (ps[miss] - ps[start])[:, None]
     guess = Z[start] + step
     # the gait on the other root, where the sweep's search found it
-    found = np.asarray(gaits.result._value)[miss] == RESULTS.other_cycle._value
+    found = np.asarray(result_codes(gaits.result))[miss] == result_codes(RESULTS.other_cycle)
     off = np.abs(Z[miss] - guess).max(-1)
     passed = (
         found & (off <= 0.25 * np.abs(step).max(-1)) & (reach <= 2 * np.abs(ps[miss] - ps[start]))

@@ -30,7 +30,7 @@ import jax
 import jax.numpy as jnp
 
 from .. import mechanics as mech
-from .._results import RESULTS
+from .._results import RESULTS, result_codes, results_from_codes
 from ..mechanics import WalkerModel
 from ._simulate import DEFAULT_CONFIG, StepResult, _swing, flow
 
@@ -240,9 +240,7 @@ def multidomain_step(model, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None,
     ok = code == RESULTS.successful
     x_plus = jnp.where(ok, x, x_safe)
     impulse = jnp.where(ok, impulse, jnp.zeros_like(impulse))
-    result_stack = eqx.tree_at(
-        lambda r: r._value, RESULTS.successful, jnp.stack([c._value for c in codes])
-    )
+    result_stack = results_from_codes(jnp.stack([result_codes(c) for c in codes]))
     info = DomainInfo(
         jnp.stack(starts),
         jnp.stack(ends),
@@ -273,7 +271,7 @@ def _domain_grids(model, info, num_points, config, fields=None):
         ys = sol.ys
         assert ys is not None  # saved at `ts`
         if i:  # reached only if every earlier domain succeeded
-            reached = info.result._value[i - 1] == RESULTS.successful._value
+            reached = result_codes(info.result)[i - 1] == result_codes(RESULTS.successful)
             ys = jnp.where(reached, ys, xs_all[-1][-1])
         ts_all.append(ts)
         xs_all.append(ys)

@@ -412,7 +412,7 @@ def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
 
     init = (x0, valid, RESULTS.where(valid, RESULTS.successful, RESULTS.bad_input))
     (_, _, first_fail), (steps, dense) = jax.lax.scan(body, init, None, length=num_steps)
-    num_ok = jnp.sum(steps.result._value == RESULTS.successful._value)
+    num_ok = jnp.sum(steps.result == RESULTS.successful)
     dense_t, dense_x = (None, None) if dense is None else dense
     return Simulation(steps, first_fail, num_ok, x0, dense_t, dense_x)
 

@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._results import result_names
+from .._results import result_codes, result_names
 from ..gait import find_gaits, sweep
 from ..hybrid import simulate
 from ..models import CompassGait
@@ -79,7 +79,7 @@ def _multipliers(slopes_deg, zs):
         "poincare": m.poincare,
         "period": m.period,
         "x_minus": m.x_minus,
-        "result": m.result._value,
+        "result": result_codes(m.result),
     }
 
 

@@ -19,6 +19,7 @@ import numpy as np
 
 from .._batching import MAX_DISPATCH, host_workers, padded_map
 from .._programs import stored_jit
+from .._results import result_codes
 from ..hybrid import FAST_CONFIG
 from ._bisection import bisect_threshold
 from ._gait_check import require_gait
@@ -37,7 +38,7 @@ def _recover_chunk(model, z, z_star, num_steps, tol, config):
         "label": rec.label,
         "steps": rec.steps,
         "period": rec.period,
-        "result": rec.result._value,
+        "result": result_codes(rec.result),
         "z_final": jax.vmap(model.state_to_section)(rec.x_final),
     }
 

@@ -16,7 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._programs import stored_jit
-from .._results import RESULTS
+from .._results import RESULTS, result_codes, results_from_codes
 from ..hybrid import FAST_CONFIG, step_unchecked
 
 CONVERGED, FELL, OTHER_CYCLE, UNDECIDED = 0, 1, 2, 3
@@ -143,14 +143,14 @@ def _recover(
 
     def update(carry, sr):
         k, x, alive, label, steps, code, hist, dist, times = carry
-        ok = sr.result._value == RESULTS.successful._value
+        ok = sr.result == RESULTS.successful
         fail = alive & ~ok
         x_new = jnp.where((alive & ok)[:, None], sr.x_plus, x)
         d = norm(x_new - x_star)
         newly_conv = alive & ok & (d < tol) & (label < 0)
         label = jnp.where(fail, FELL, jnp.where(newly_conv, CONVERGED, label))
         steps = jnp.where(newly_conv | fail, k + 1, steps)
-        code = jnp.where(fail, sr.result._value, code)
+        code = jnp.where(fail, result_codes(sr.result), code)
         times = times.at[:, k].set(jnp.where(alive, sr.period, 0.0))
         if stop_when_converged:
             alive = alive & ok & ~newly_conv
@@ -163,7 +163,7 @@ def _recover(
     label0 = jnp.where(conv0, CONVERGED, -1)
     steps0 = jnp.where(conv0, 0, -1)
     alive0 = ~conv0 if stop_when_converged else jnp.ones(B, bool)
-    code0 = jnp.full(B, RESULTS.successful._value)
+    code0 = jnp.full(B, result_codes(RESULTS.successful))
     hist0 = jnp.zeros((B, H, x0.shape[-1])).at[:, 0].set(x0)
     dist_arr0 = jnp.broadcast_to(dist0[:, None], (B, num_steps + 1))
     times0 = jnp.zeros((B, num_steps))
@@ -194,10 +194,10 @@ def _recover(
     period = jnp.where(other, period, 0)
     code = jnp.where(
         other,
-        RESULTS.other_cycle._value,
-        jnp.where(label == UNDECIDED, RESULTS.undecided._value, code),
+        result_codes(RESULTS.other_cycle),
+        jnp.where(label == UNDECIDED, result_codes(RESULTS.undecided), code),
     )
-    result = eqx.tree_at(lambda r: r._value, RESULTS.successful, code)
+    result = results_from_codes(code)
     return Recovery(label, steps, period, result, x, dist, times)
 
 

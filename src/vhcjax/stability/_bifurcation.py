@@ -9,7 +9,7 @@ import numpy as np
 
 from .._batching import MAX_DISPATCH, host_workers, padded_map
 from .._programs import stored_jit
-from .._results import RESULTS
+from .._results import RESULTS, result_codes
 from ..hybrid import FAST_CONFIG, simulate
 from ..models import CompassGait  # the default model (thesis Table 1) where none is given
 
@@ -92,8 +92,8 @@ def bifurcation_diagram(
         mesh=mesh,
         stage="simulation",
     )
-    periods, codes = np.asarray(p), np.asarray(r._value)
-    fell = codes != int(RESULTS.successful._value)
+    periods, codes = np.asarray(p), np.asarray(result_codes(r))
+    fell = codes != int(result_codes(RESULTS.successful))
     nd = np.array([-1 if f else detect_period(pp) for pp, f in zip(periods, fell)])
     return BifurcationDiagram(psis, periods, fell, codes, nd)
 

@@ -7,7 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._results import RESULTS
+from .._results import RESULTS, result_codes, results_from_codes
 from ..models import CompassGait  # the default model (thesis Table 1) where none is given
 
 
@@ -59,11 +59,11 @@ def period1_family(
     valid = np.isfinite(psis) & (psis >= MIN_SLOPE)
     z = np.zeros((len(psis), 2 * model.n_dof - 1))
     periods = np.zeros(len(psis))
-    codes = np.full(len(psis), int(RESULTS.bad_input._value), dtype=np.int32)
+    codes = np.full(len(psis), int(result_codes(RESULTS.bad_input)), dtype=np.int32)
     if valid.any():  # `"auto"`: the VHC search, shooting where it fails
         g = sweep(model, psis[valid], family, method, anchor_step=coarse_step, tangents=False)
         z[valid] = np.asarray(g.gaits.z)
         periods[valid] = np.asarray(g.gaits.T)
-        codes[valid] = np.asarray(g.gaits.result._value)
-    result = eqx.tree_at(lambda r: r._value, RESULTS.successful, jnp.asarray(codes))
+        codes[valid] = np.asarray(result_codes(g.gaits.result))
+    result = results_from_codes(codes)
     return Family(jnp.asarray(psis), jnp.asarray(z), jnp.asarray(periods), result)

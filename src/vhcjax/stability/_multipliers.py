@@ -18,7 +18,7 @@ import numpy as np
 
 from .._batching import padded_map
 from .._programs import stored_jit
-from .._results import RESULTS, result_names
+from .._results import RESULTS, result_codes, result_names
 from ..hybrid import DEFAULT_CONFIG, flow, step_map, step_unchecked
 from ._transverse import TransverseLinearization, transverse_linearization
 
@@ -298,7 +298,7 @@ def _pick(x, index):
 def transverse_note(gm, index=None):
     """`None` where the transverse multipliers of a (possibly batched, then `index`)
     `GaitMultipliers` hold; else a one-line reason they are not to be trusted."""
-    name = result_names(_pick(gm.transverse_result._value, index))
+    name = result_names(_pick(result_codes(gm.transverse_result), index))
     if name == "successful":
         return None
     assert isinstance(name, str)  # one result: a single `GaitMultipliers` or `index` given
