@@ -579,7 +579,7 @@ def test_continuation_in_calls_equals_the_searches_and_runs_only_its_points():
     end = ref.with_slope(math.radians(3.6))
     s = np.linspace(0.0, 1.0, C._CHUNK + 4)
     g = C._run_continuation(ref, end, s, z0, sign, "vhc")
-    assert (np.asarray(g.result == vj.RESULTS.successful)).all()
+    assert np.asarray(g.result == vj.RESULTS.successful).all()
     path = C._path(ref, end)
     for i in (0, C._CHUNK - 1, C._CHUNK, len(s) - 1):
         guess = (1.02 * g.a[i], 0.98 * g.b[i])

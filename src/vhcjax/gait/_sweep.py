@@ -251,7 +251,7 @@ def sweep(model, slopes, family="stable", method="auto", *, anchor_step=ANCHOR_S
     first = "vhc" if method == "auto" else method
     gaits, tangent, edge_tangent = _sweep(own, psi, family, first, anchor_step, tangents)
     if method == "auto":
-        miss = np.flatnonzero(np.asarray(gaits.result != RESULTS.successful))
+        miss = np.flatnonzero(np.array(gaits.result != RESULTS.successful))
         if miss.size:
             g2, t2, e2 = _sweep(own, psi[miss], family, "shooting", anchor_step, tangents)
             gaits = dataclasses.replace(gaits, method="auto")
@@ -305,7 +305,7 @@ def _sweep(model, psi, family, method, anchor_step, tangents):
         _anchor_grid(p0, min(ps[0], p0), anchor_step),
     ):
         g = _run_continuation(anchor_model, end, np.log(grid / p0), z0, sign, method)
-        ok = np.asarray(g.result == RESULTS.successful)
+        ok = np.array(g.result == RESULTS.successful)
         # A sequential continuation past a failure is unreliable: keep the run up to it.
         n_ok = len(ok) if ok.all() else int(np.argmin(ok))
         z = np.asarray(jax.vmap(lambda gg: _unknowns(gg, method))(g))
@@ -330,7 +330,7 @@ def _sweep(model, psi, family, method, anchor_step, tangents):
         gaits, tangent, have = _other_root(model, ps, gaits, tangent, have, family, method)
     # 6. the tangents still wanted: all of them, or those next to a missed slope (a fold?)
     # in the order of the slopes or in the order given (`ends()` looks there)
-    ok = np.asarray(gaits.result == RESULTS.successful)
+    ok = np.array(gaits.result == RESULTS.successful)
     inverse = np.empty_like(order)
     inverse[order] = np.arange(len(order))
     edge = _edges(ok) | _edges(ok[inverse])[order]
@@ -364,7 +364,7 @@ def _retry(model, ps, gaits, family, method, sign, reach, all_tangents=True):
 
     unknowns = jax.vmap(lambda g: _unknowns(g, method))
     Z = np.array(unknowns(gaits))
-    ok = np.asarray(gaits.result == RESULTS.successful)
+    ok = np.array(gaits.result == RESULTS.successful)
     T = np.zeros_like(Z)
     have = ok.copy() if all_tangents else np.zeros_like(ok)
     if all_tangents and ok.any():
@@ -388,10 +388,10 @@ def _retry(model, ps, gaits, family, method, sign, reach, all_tangents=True):
         again = find_gaits(
             model, jnp.asarray(guess), family, method, psi=jnp.asarray(ps[miss]), far=math.inf
         )
-        found = np.asarray(again.result == RESULTS.successful)
+        found = np.array(again.result == RESULTS.successful)
         # a landing on the other root is kept too: `_other_root` reads passages from it
         code = np.asarray(result_codes(gaits.result))
-        other = (np.asarray(again.result == RESULTS.other_cycle)) & (
+        other = np.array(again.result == RESULTS.other_cycle) & (
             code[miss] != result_codes(RESULTS.other_cycle)
         )
         if other.any():
@@ -455,7 +455,7 @@ def _other_root(model, ps, gaits, T, have, family, method):
     gaits, and the tangents and where they were computed (as `_retry`)."""
     import numpy as np
 
-    ok = np.asarray(gaits.result == RESULTS.successful)
+    ok = np.array(gaits.result == RESULTS.successful)
     n = len(ok)
     runs, near = [], []  # the missed slopes beyond each found gait next to a miss
     for j in np.where(_edges(ok))[0]:
