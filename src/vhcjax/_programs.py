@@ -446,6 +446,21 @@ def _spread(leaves):
     return False
 
 
+class X64Error(RuntimeError):
+    """JAX's float64 mode is off: vhcjax's solves to 1e-12 need it."""
+
+
+def require_x64():
+    """Raise `X64Error` (one line, with the fix) if JAX's float64 mode is off: vhcjax
+    turns it on when imported, so it was turned off later in the process. Every stored
+    program checks this when called."""
+    if not jax.config.values["jax_enable_x64"]:
+        raise X64Error(
+            "vhcjax needs float64, but JAX's float64 mode was turned off after vhcjax was "
+            "imported: call jax.config.update('jax_enable_x64', True) before using vhcjax"
+        )
+
+
 def stored_jit(fn):
     """`eqx.filter_jit(fn)` whose programs are also kept on disk (see the module docstring).
 
@@ -481,6 +496,7 @@ def stored_jit(fn):
 
     @functools.wraps(fn)
     def call(*args, **kwargs):
+        require_x64()
         dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
         leaves, in_tree = jax.tree_util.tree_flatten(dynamic)
         traced = _traced(leaves)

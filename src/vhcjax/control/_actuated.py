@@ -98,6 +98,7 @@ def _fields(model, feedback):
     return [closed_loop_field(model, feedback, i) for i in range(model.num_domains)]
 
 
+@stored_jit
 def closed_loop_step(model, x0, feedback, config=DEFAULT_CONFIG, alive=True):
     """One step (swing to heel strike, impact; every domain of a multi-domain model) of
     the walker under `feedback`.

@@ -99,6 +99,7 @@ def closed_loop_multipliers_transverse(
     return _sort(jnp.linalg.eigvals(M))
 
 
+@stored_jit
 def closed_loop_step_map(model, feedback, z, config=DEFAULT_CONFIG):
     """One step of the walker under `feedback` in post-impact section coordinates:
     `(z_next, result)`."""
@@ -311,6 +312,7 @@ def closed_loop_basin(
     )
 
 
+@stored_jit
 def closed_loop_push_step(model, feedback, x0, t_push, impulse, config=DEFAULT_CONFIG, alive=True):
     """One step of the walker under `feedback` from the post-impact state `x0`, with a hip
     impulse `impulse` (N s, world frame) at time `t_push` into the step (as

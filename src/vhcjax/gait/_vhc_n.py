@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import optimistix as optx
 
+from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import solve_to_event
 from ._vhc import constraint, phi_second_derivative
@@ -50,6 +51,7 @@ def _field(s, y, args):
     return -jnp.concatenate([dphi, ddphi, (1.0 / dtheta)[None]])
 
 
+@stored_jit
 def vhc_orbit(model, z, *, rtol=1e-11, atol=1e-11, max_steps=4096):
     """Integrate the VHC from the post-impact section point `z` to heel strike."""
     n = model.n_dof
@@ -133,6 +135,7 @@ class VHCGait(eqx.Module):
     result: RESULTS
 
 
+@stored_jit
 def vhc_gait_search(model, z0, *, rtol=1e-12, atol=1e-12, max_steps=40):
     """Newton (optimistix) on $z \\mapsto z_{next}(z) - z$ along the VHC arc (the n-DOF
     Problem 1). Jacobians by `jax.jacfwd` through the $\\theta$-event. Never raises."""

@@ -116,6 +116,7 @@ def _pushed_step(model, x0, t_push, kick, config, alive):
     return finish_step(model, x_minus, t_end, code, x0)
 
 
+@stored_jit
 def impulse_step(model, x0, t_push, impulse, config=DEFAULT_CONFIG, alive=True):
     """One step from the post-impact state `x0` with a hip impulse `impulse` (N s, world
     frame) at time `t_push` after the step began (before the nominal heel strike).
@@ -130,6 +131,7 @@ def impulse_step(model, x0, t_push, impulse, config=DEFAULT_CONFIG, alive=True):
     return _pushed_step(model, x0, t_push, kick, config, alive)
 
 
+@stored_jit
 def pulse_step(model, x0, t_push, force, duration, config=DEFAULT_CONFIG, alive=True):
     """One step from `x0` with a hip force `force` (N, world frame) acting during
     `[t_push, t_push + duration]` (integrated as its own segment, so that the adaptive

@@ -1,0 +1,76 @@
+"""vhcjax composes like a JAX library, for a user's own model (`_user_model.RodWalker`):
+a second call with the same shapes traces nothing, and the public functions that return
+numbers work under `jax.jit`, `jax.vmap` and `jax.jacfwd`, with derivatives equal to
+central differences."""
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from _user_model import TRACES, RodWalker
+
+import vhcjax as vj
+
+Z0 = jnp.array([0.2, -1.0, -0.2])  # a Newton guess for the rod walker's gait at 0.03 rad
+
+
+def _gait_z(psi=0.03):
+    fp = vj.fixed_point(RodWalker(psi=jnp.asarray(psi)), Z0)
+    assert vj.result_names(fp.result) == "successful"
+    return fp.z
+
+
+CALLS = {
+    "step": lambda m, z: vj.step(m, m.section_to_state(z), throw=False).x_plus,
+    "simulate": lambda m, z: vj.simulate(m, m.section_to_state(z), 3).steps.x_plus,
+    "step_map": lambda m, z: vj.step_map(m, z).z_next,
+    "fixed_point": lambda m, z: vj.fixed_point(m, z).z,
+    "poincare_jacobian": lambda m, z: vj.poincare_jacobian(m, z),
+    "poincare_multipliers": lambda m, z: vj.poincare_multipliers(m, z),
+    "gait_multipliers": lambda m, z: vj.gait_multipliers(m, z).poincare,
+    "gait_spectrum": lambda m, z: vj.gait_spectrum(m, vj.find_gait(m, guess=z)).spectral_radius,
+    "simulate_dense": lambda m, z: vj.simulate(m, m.section_to_state(z), 2, dense_points=9).dense_x,
+    "transverse_linearization": lambda m, z: _transverse(m, z),
+    "vhc_orbit": lambda m, z: vj.vhc_orbit(m, z).z_next,
+    "vhc_gait_search": lambda m, z: vj.vhc_gait_search(m, z).z,
+}
+
+
+def _transverse(m, z):
+    sr = vj.step(m, m.section_to_state(z))
+    return vj.transverse_linearization(m, sr.x_plus, sr.x_minus, sr.period).multipliers
+
+
+@pytest.mark.parametrize("name", sorted(CALLS))
+def test_a_second_call_traces_nothing(name):
+    """A second call with the same shapes, other values (slope, state), runs the
+    program of the first: the model's Python code does not run again."""
+    z = _gait_z()
+    CALLS[name](RodWalker(psi=jnp.asarray(0.03)), z)
+    before = TRACES[0]
+    CALLS[name](RodWalker(psi=jnp.asarray(0.031)), z + 1e-4)
+    assert TRACES[0] == before
+
+
+def _period(psi):
+    return vj.fixed_point(RodWalker(psi=psi), Z0).periods[0]
+
+
+def test_jit_vmap_and_forward_derivatives_of_the_gait():
+    psis = jnp.array([0.029, 0.03, 0.031])
+    plain = np.array([float(_period(jnp.asarray(p))) for p in psis])
+    np.testing.assert_allclose(jax.jit(_period)(psis[1]), plain[1], rtol=1e-12)
+    np.testing.assert_allclose(jax.vmap(_period)(psis), plain, rtol=1e-10)
+    h = 1e-5
+    fd = (float(_period(jnp.asarray(0.03 + h))) - float(_period(jnp.asarray(0.03 - h)))) / (2 * h)
+    np.testing.assert_allclose(jax.jacfwd(_period)(jnp.asarray(0.03)), fd, rtol=1e-6)
+
+
+def test_forward_derivative_of_the_spectral_radius():
+    def radius(psi):
+        m = RodWalker(psi=psi)
+        return jnp.max(jnp.abs(vj.poincare_multipliers(m, vj.fixed_point(m, Z0).z)))
+
+    h = 1e-5
+    fd = (float(radius(jnp.asarray(0.03 + h))) - float(radius(jnp.asarray(0.03 - h)))) / (2 * h)
+    np.testing.assert_allclose(jax.jacfwd(radius)(jnp.asarray(0.03)), fd, rtol=1e-5)
