@@ -74,3 +74,21 @@ def test_forward_derivative_of_the_spectral_radius():
     h = 1e-5
     fd = (float(radius(jnp.asarray(0.03 + h))) - float(radius(jnp.asarray(0.03 - h)))) / (2 * h)
     np.testing.assert_allclose(jax.jacfwd(radius)(jnp.asarray(0.03)), fd, rtol=1e-5)
+
+
+def test_results_are_coded_not_made_up():
+    """An invalid parameter is `bad_input` without a search; a gait of another model is
+    `not_a_gait`; a section point of the wrong shape is one `ValueError` naming it."""
+    z = _gait_z()
+    nan_model = RodWalker(psi=jnp.asarray(0.03), mH=float("nan"))
+    assert vj.result_names(vj.fixed_point(nan_model, Z0).result) == "bad_input"
+    gait = vj.find_gait(RodWalker(psi=jnp.asarray(0.03)), guess=z)
+    assert vj.result_names(vj.gait_spectrum(RodWalker(psi=jnp.asarray(0.03)), gait).result) == (
+        "successful"
+    )
+    spectrum = vj.gait_spectrum(nan_model, gait)
+    assert vj.result_names(spectrum.result) == "bad_input"
+    other = vj.gait_spectrum(RodWalker(psi=jnp.asarray(0.04)), gait)
+    assert vj.result_names(other.result) == "not_a_gait"
+    with pytest.raises(ValueError, match="z0 must be one section point of shape \\(3,\\)"):
+        vj.fixed_point(RodWalker(psi=jnp.asarray(0.03)), jnp.zeros(4))

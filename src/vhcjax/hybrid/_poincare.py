@@ -113,9 +113,30 @@ def _fixed_point_equation(z, model, k, config):
 
 @stored_jit
 def _search(model, z0, k, rtol, atol, max_steps, config):
-    """The Newton search of `fixed_point` (on a model it does not differentiate)."""
+    """The Newton search of `fixed_point` (on a model it does not differentiate). An
+    invalid model (a NaN or negative parameter: `validate`) is `bad_input` at once,
+    without a search."""
     z0 = jnp.asarray(z0, dtype=float)
+    valid = model.validate() if hasattr(model, "validate") else jnp.asarray(True)
 
+    def search():
+        return _newton(model, z0, k, rtol, atol, max_steps, config)
+
+    def refused():
+        out = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), jax.eval_shape(search))
+        return FixedPoint(
+            z0,
+            model.section_to_state(z0),
+            out.periods,
+            out.iterations,
+            out.residual,
+            RESULTS.bad_input,
+        )
+
+    return jax.lax.cond(valid, search, refused)
+
+
+def _newton(model, z0, k, rtol, atol, max_steps, config):
     def residual_fn(z, _):
         out = _step_map(model, z, k, config)
         r = out.z_next - z
@@ -170,7 +191,8 @@ def fixed_point(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, config=
 
     The search is one compiled program per model class and static arguments (a stored
     program, see `vhcjax._programs`). A failed search raises nothing: inspect `result`
-    (use under `vmap` freely); only a `k` that is not a positive integer is a
+    (use under `vmap` freely); an invalid model is coded `bad_input` without a search;
+    only a `k` that is not a positive integer or a `z0` of the wrong shape is a
     `ValueError`. Differentiable with respect to the model's parameters (`jax.jvp`,
     `jax.jacfwd`, `jax.grad`, `jax.jacrev`) by the implicit function theorem at the fixed
     point (`vhcjax.solvers.implicit_outputs`), never through the Newton iterations: the
@@ -178,6 +200,7 @@ def fixed_point(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, config=
     the implicit-derivative program. A failed search has zero derivatives.
     """
     z0 = jax.lax.stop_gradient(jnp.asarray(z0, dtype=float))
+    check_section_shape(model, z0, "fixed_point: z0")
     k = check_map_steps(k)
     fp = _search(detach(model), z0, k, rtol, atol, max_steps, config)
     return _with_derivatives(model, fp, k, config)

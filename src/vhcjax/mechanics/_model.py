@@ -66,6 +66,8 @@ class WalkerModel(eqx.Module):
         ok = jnp.asarray(True)
         for field in dataclasses.fields(self):
             v = getattr(self, field.name, None)
+            if isinstance(v, float):  # a Python float parameter (a static leaf)
+                v = jnp.asarray(v)
             if v is None or not eqx.is_inexact_array(v):
                 continue
             ok = ok & jnp.all(jnp.isfinite(v))

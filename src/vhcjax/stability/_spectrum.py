@@ -15,8 +15,9 @@ import jax
 import jax.numpy as jnp
 
 from .._results import RESULTS
-from ..hybrid import DEFAULT_CONFIG, jacobian
-from ..solvers import eigenvalues, linearised
+from ..hybrid import DEFAULT_CONFIG, jacobian, step_map
+from ..solvers import detach, eigenvalues, linearised
+from ._multipliers import returns_to
 
 
 class GaitSpectrum(eqx.Module):
@@ -25,7 +26,10 @@ class GaitSpectrum(eqx.Module):
     - `multipliers`: eigenvalues of $J$, complex, sorted by modulus (descending).
     - `spectral_radius`: $\\max_i |\\lambda_i|$; the gait is stable when it is below 1.
     - `jacobian`: $J = \\partial P/\\partial z$ at the gait.
-    - `result`: the gait's code (a failed gait has zero derivatives).
+    - `result`: the gait's code where it failed; else `bad_input` for an invalid model
+      (a NaN or negative parameter), `not_a_gait` where one step from the gait does
+      not return to it (a gait of another model, say); a result other than
+      `successful` has zero derivatives.
     """
 
     multipliers: jax.Array
@@ -40,11 +44,24 @@ def _step_jacobian(z, model, config):
 
 def _spectrum_one(model, gait, config):
     z = model.state_to_section(gait.x_plus)
-    ok = gait.result == RESULTS.successful
+    # A gait of this model: valid parameters, and one step from it comes back to it.
+    valid = model.validate() if hasattr(model, "validate") else jnp.asarray(True)
+    back = step_map(detach(model), jax.lax.stop_gradient(z), 1, config)
+    periodic = (back.result == RESULTS.successful) & returns_to(z, back.z_next)
+    code = RESULTS.where(
+        ~valid,
+        RESULTS.bad_input,
+        RESULTS.where(
+            gait.result != RESULTS.successful,
+            gait.result,
+            RESULTS.where(periodic, RESULTS.successful, RESULTS.not_a_gait),
+        ),
+    )
+    ok = code == RESULTS.successful
     J = linearised(_step_jacobian, config)(z, model)
     J = jnp.where(ok, J, jax.lax.stop_gradient(J))
     lam = eigenvalues(J)
-    return GaitSpectrum(lam, jnp.abs(lam[0]), J, gait.result)
+    return GaitSpectrum(lam, jnp.abs(lam[0]), J, code)
 
 
 def gait_spectrum(model, gait, *, config=DEFAULT_CONFIG):
