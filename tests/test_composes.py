@@ -92,3 +92,20 @@ def test_results_are_coded_not_made_up():
     assert vj.result_names(other.result) == "not_a_gait"
     with pytest.raises(ValueError, match="z0 must be one section point of shape \\(3,\\)"):
         vj.fixed_point(RodWalker(psi=jnp.asarray(0.03)), jnp.zeros(4))
+
+
+def test_find_gait_without_a_guess_under_jit_vmap_and_grad():
+    """`find_gait` without a guess (a continuation whose steps are chosen on the host)
+    under `jit(vmap(value_and_grad))`: the periods of the plain calls, derivatives equal
+    to central differences."""
+
+    def period(psi):
+        return vj.find_gait(vj.CompassGait(psi=psi), "stable").T
+
+    psis = jnp.array([0.05, 0.052])
+    values, grads = jax.jit(jax.vmap(jax.value_and_grad(period)))(psis)
+    h = 1e-5
+    for i, psi in enumerate(np.asarray(psis)):
+        np.testing.assert_allclose(values[i], period(jnp.asarray(psi)), rtol=1e-10)
+        fd = (period(jnp.asarray(psi + h)) - period(jnp.asarray(psi - h))) / (2 * h)
+        np.testing.assert_allclose(grads[i], fd, rtol=1e-6)

@@ -64,7 +64,9 @@ def find_gait(model, family="stable", method="auto", guess=None, *, solver="newt
 
     Differentiable (`jax.grad`, `jax.jacfwd`, ...) with respect to every model parameter:
     exact derivatives by the implicit function theorem at the gait, never through the
-    search (`vhcjax.solvers.implicit_outputs`).
+    search (`vhcjax.solvers.implicit_outputs`). Under `jax.jit`, `jax.vmap` or
+    `jax.grad` without a guess, the continuation runs on the host (a `pure_callback`,
+    one member at a time under `vmap`) and the traced search starts from its gait.
 
     **Returns:** a `Gait`.
     """
@@ -84,6 +86,10 @@ def find_gait(model, family="stable", method="auto", guess=None, *, solver="newt
                 "the gait is coded bad_input"
             )
     params, model = model, detach(model)  # the search itself is never differentiated
+    if guess is None and any(
+        isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(model)
+    ):
+        guess = _found_on_host(model, family, method, solver)
     if guess is not None:
         guess = detach(jnp.asarray(guess, dtype=float))
         if throw and not isinstance(guess, jax.core.Tracer):
@@ -113,6 +119,26 @@ def find_gait(model, family="stable", method="auto", guess=None, *, solver="newt
         err = gait.result != RESULTS.successful
         gait = eqx.tree_at(lambda g: g.a, gait, gait.result.error_if(gait.a, err))
     return gait
+
+
+def _found_on_host(model, family, method, solver):
+    """The section point of the gait that `find_gait` finds on the values of a traced
+    `model` (under `jit`, `vmap`, `grad`), by a host callback: the continuation from the
+    model's reference gait chooses its steps on the host. The traced search then starts
+    from it, so the result, its code and its derivatives are those of a search from a
+    guess. A failed host search hands back its last point, and the traced search codes it."""
+    dynamic, static = eqx.partition(model, eqx.is_array)
+    x = jax.ShapeDtypeStruct((2 * model.n_dof,), jnp.float64)
+    shape = jax.eval_shape(model.state_to_section, x).shape
+
+    def host(values):
+        m = eqx.combine(jax.tree_util.tree_map(jnp.asarray, values), static)
+        gait = find_gait(m, family, method, solver=solver, throw=False)
+        return np.asarray(m.state_to_section(gait.x_plus), dtype=np.float64)
+
+    return jax.pure_callback(
+        host, jax.ShapeDtypeStruct(shape, jnp.float64), dynamic, vmap_method="sequential"
+    )
 
 
 def _derivative_method(gait):
