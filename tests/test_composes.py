@@ -66,14 +66,20 @@ def test_jit_vmap_and_forward_derivatives_of_the_gait():
     np.testing.assert_allclose(jax.jacfwd(_period)(jnp.asarray(0.03)), fd, rtol=1e-6)
 
 
-def test_forward_derivative_of_the_spectral_radius():
+def test_forward_and_reverse_derivatives_of_the_spectral_radius():
+    """Through `fixed_point` (implicit function theorem) and `poincare_multipliers`
+    (eigenvalue perturbation of a forward-mode Jacobian): `jax.grad` works, never
+    reverse mode through an ODE solve."""
+
     def radius(psi):
         m = RodWalker(psi=psi)
         return jnp.max(jnp.abs(vj.poincare_multipliers(m, vj.fixed_point(m, Z0).z)))
 
     h = 1e-5
     fd = (float(radius(jnp.asarray(0.03 + h))) - float(radius(jnp.asarray(0.03 - h)))) / (2 * h)
-    np.testing.assert_allclose(jax.jacfwd(radius)(jnp.asarray(0.03)), fd, rtol=1e-5)
+    forward = jax.jacfwd(radius)(jnp.asarray(0.03))
+    np.testing.assert_allclose(forward, fd, rtol=1e-5)
+    np.testing.assert_allclose(jax.grad(radius)(jnp.asarray(0.03)), forward, rtol=1e-10)
 
 
 def test_results_are_coded_not_made_up():

@@ -16,7 +16,7 @@ import optimistix as optx
 
 from .._programs import stored_jit
 from .._results import RESULTS
-from ..solvers import detach, implicit_outputs
+from ..solvers import detach, eigenvalues, implicit_outputs, linearised
 from ._simulate import DEFAULT_CONFIG, check_map_steps, check_section_shape, step_unchecked
 
 
@@ -63,26 +63,27 @@ def _jacobian(model, z, k, config):
     return jax.jacfwd(lambda zz: _step_map(model, zz, k, config).z_next)(z)
 
 
+def _jacobian_of(z, model, k, config):
+    return _jacobian(model, z, k, config)
+
+
 def jacobian(model, z, k=1, config=DEFAULT_CONFIG):
     """$\\partial P^k / \\partial z$ by forward-mode autodiff through the events (a stored
-    program, as `step_map`)."""
-    return _jacobian(model, jnp.asarray(z, dtype=float), check_map_steps(k), config)
-
-
-@stored_jit
-def _multipliers(model, z, k, config):
-    """`multipliers` for a checked `k`."""
-    ev = jnp.linalg.eigvals(_jacobian(model, z, k, config))
-    return ev[jnp.argsort(-jnp.abs(ev))]
+    program, as `step_map`). Differentiable in forward and reverse mode (`jax.grad`):
+    its own derivatives come from a forward-mode Jacobian
+    (`vhcjax.solvers.linearised`), never from reverse mode through the ODE solves."""
+    z = jnp.asarray(z, dtype=float)
+    return linearised(_jacobian_of, check_map_steps(k), config)(z, model)
 
 
 def multipliers(model, z, k=1, config=DEFAULT_CONFIG):
     """Eigenvalues of the Poincare-map Jacobian at `z` (sorted by modulus, descending).
 
-    Complex array of length 2n-1 (a stored program, as `step_map`). Eigenvalue
-    computation runs on the host (CPU) as JAX only implements non-symmetric `eig` there.
+    Complex array of length 2n-1; differentiable as `jacobian` (eigenvalue perturbation
+    for the derivatives). Eigenvalue computation runs on the host (CPU) as JAX only
+    implements non-symmetric `eig` there.
     """
-    return _multipliers(model, jnp.asarray(z, dtype=float), check_map_steps(k), config)
+    return eigenvalues(jacobian(model, z, k, config))
 
 
 class FixedPoint(eqx.Module):

@@ -22,7 +22,8 @@ from .._batching import padded_map
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..gait import find_gait, find_gaits
-from ..hybrid import DEFAULT_CONFIG, jacobian
+from ..hybrid import DEFAULT_CONFIG
+from ..hybrid._poincare import _jacobian as jacobian  # forward mode, as its callers need
 from ..solvers import detach
 from ..stability import gait_spectrum
 

@@ -9,7 +9,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._results import RESULTS
-from ..hybrid import DEFAULT_CONFIG, fixed_point, jacobian, step_map
+from ..hybrid import DEFAULT_CONFIG, fixed_point, step_map
+from ..hybrid._poincare import _jacobian as jacobian  # forward mode, as its callers need
 from ..models import CompassGait  # the default model (thesis Table 1) where none is given
 from ._multipliers import _sort
 

@@ -15,7 +15,8 @@ import jax
 import jax.numpy as jnp
 
 from .._results import RESULTS
-from ..hybrid import DEFAULT_CONFIG, jacobian, step_map
+from ..hybrid import DEFAULT_CONFIG, step_map
+from ..hybrid._poincare import _jacobian as jacobian  # wrapped in `linearised` below
 from ..solvers import detach, eigenvalues, linearised
 from ._multipliers import returns_to
 
