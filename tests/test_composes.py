@@ -115,3 +115,16 @@ def test_find_gait_without_a_guess_under_jit_vmap_and_grad():
         np.testing.assert_allclose(values[i], period(jnp.asarray(psi)), rtol=1e-10)
         fd = (period(jnp.asarray(psi + h)) - period(jnp.asarray(psi - h))) / (2 * h)
         np.testing.assert_allclose(grads[i], fd, rtol=1e-6)
+
+
+def test_a_failing_member_does_not_sink_the_batch():
+    """Under `vmap`, `find_gait` from one guess codes each member: a slope where the
+    guess falls does not raise for the whole batch."""
+    z = _gait_z()
+
+    def search(psi):
+        return vj.find_gait(RodWalker(psi=psi), guess=z)
+
+    gaits = jax.vmap(search)(jnp.array([0.03, 0.6]))
+    assert vj.result_names(gaits.result) == ["successful", "not_converged"]
+    np.testing.assert_allclose(gaits.x_plus[0], search(jnp.asarray(0.03)).x_plus, atol=1e-12)

@@ -56,6 +56,7 @@ def find_gait(model, family="stable", method="auto", guess=None, *, solver="newt
     - `solver`: VHC only: `"newton"` (default), `"lm"`, `"optimistix"` or `"optax"`.
     - `throw`: raise if no gait was found (a `ValueError` at once for a non-finite
       guess or an invalid model; with `throw=False` that gait is coded `bad_input`).
+      Under `jax.jit` or `jax.vmap` nothing is raised: read `result` (per member).
 
     The search runs in the walker's own units (`WalkerModel.in_own_units`: masses,
     lengths and gravity relative to their sums), so a walker and its scaled copy give
@@ -115,7 +116,9 @@ def find_gait(model, family="stable", method="auto", guess=None, *, solver="newt
     gait = dataclasses.replace(gait, method=method)  # the label of the call, not the data
     gait = _clean_failed(gait, guess)
     gait = with_derivatives(params, gait, _derivative_method(gait), family_sign(family))
-    if throw:
+    if throw and not isinstance(result_codes(gait.result), jax.core.Tracer):
+        # outside `jit`/`vmap` only: inside, each member keeps its own code, so that one
+        # failure does not sink a batch
         err = gait.result != RESULTS.successful
         gait = eqx.tree_at(lambda g: g.a, gait, gait.result.error_if(gait.a, err))
     return gait
