@@ -58,3 +58,25 @@ def test_cache_on_by_default_and_off_writes_nothing(tmp_path):
     out = _run(env)
     assert out == ["2"]  # no directory printed
     assert not (tmp_path / "off").exists()
+
+
+_USER_SETTINGS = """
+import jax
+jax.config.update("jax_compilation_cache_dir", {directory!r})
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 5.0)
+v = jax.config.values
+before = v["jax_persistent_cache_min_entry_size_bytes"]
+import vhcjax
+print(v["jax_compilation_cache_dir"], v["jax_persistent_cache_min_compile_time_secs"],
+      v["jax_persistent_cache_min_entry_size_bytes"] == before, v["jax_enable_x64"])
+"""
+
+
+def test_import_keeps_the_users_own_cache_settings(tmp_path):
+    """A cache directory and threshold the user gave JAX before importing vhcjax stay as
+    they were; float64 is the one setting vhcjax changes then."""
+    script = _USER_SETTINGS.format(directory=str(tmp_path / "mine"))
+    out = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, check=True
+    ).stdout.split()
+    assert out == [str(tmp_path / "mine"), "5.0", "True", "True"]
