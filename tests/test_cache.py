@@ -64,9 +64,9 @@ _USER_SETTINGS = """
 import jax
 jax.config.update("jax_compilation_cache_dir", {directory!r})
 jax.config.update("jax_persistent_cache_min_compile_time_secs", 5.0)
-v = jax.config.values
-before = v["jax_persistent_cache_min_entry_size_bytes"]
+before = jax.config.values["jax_persistent_cache_min_entry_size_bytes"]
 import vhcjax
+v = jax.config.values
 print(v["jax_compilation_cache_dir"], v["jax_persistent_cache_min_compile_time_secs"],
       v["jax_persistent_cache_min_entry_size_bytes"] == before, v["jax_enable_x64"])
 """
