@@ -147,3 +147,9 @@ def test_heel_strike_without_locks_is_the_augmented_impact():
 def test_multidomain_model_has_no_single_vector_field(kw):
     with pytest.raises(NotImplementedError):
         kw.vector_field(0.0, jnp.zeros(6))
+
+
+def test_multidomain_step_refuses_a_single_vector_field(kw):
+    """One field for every domain would be silently wrong: refused before any step."""
+    with pytest.raises(ValueError, match="one vector field per domain"):
+        kw.hybrid_step(jnp.zeros(6), vector_field=lambda t, x, args: jnp.zeros_like(x))

@@ -46,7 +46,7 @@ def enable_compilation_cache(directory=None):
     """Keep compiled programs on disk (JAX's persistent compilation cache). vhcjax calls
     this on import; call it to move the cache. It applies to every program of the
     process (a JAX-wide setting). Programs traced by vhcjax are kept there too
-    (`programs/`, see `vhcjax._programs`), so that a later process does not trace them again.
+    (in `programs/`), so that a later process does not trace them again.
 
     **Arguments:**
 

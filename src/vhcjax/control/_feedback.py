@@ -89,7 +89,7 @@ class TransverseFeedback(eqx.Module):
 class HybridTransverseFeedback(eqx.Module):
     """The feedback law of a gait of a multi-domain model: one `TransverseFeedback` per
     domain (`domains`), each on its own phase. The closed-loop step applies
-    `in_domain(i)` in domain `i` (`vhcjax.control.closed_loop_step`)."""
+    `in_domain(i)` in domain `i` (`vhcjax.closed_loop_step`)."""
 
     domains: tuple
 

@@ -65,7 +65,7 @@ def find_gait(model, family="stable", method="auto", guess=None, *, solver="newt
 
     Differentiable (`jax.grad`, `jax.jacfwd`, ...) with respect to every model parameter:
     exact derivatives by the implicit function theorem at the gait, never through the
-    search (`vhcjax.solvers.implicit_outputs`). Under `jax.jit`, `jax.vmap` or
+    search. Under `jax.jit`, `jax.vmap` or
     `jax.grad` without a guess, the continuation runs on the host (a `pure_callback`,
     one member at a time under `vmap`) and the traced search starts from its gait.
 
@@ -367,7 +367,7 @@ def find_gaits(
       for guesses predicted next to a gait, as `sweep` makes them).
 
     With `solver="newton"` one Newton loop iterates every member of a batch, each member
-    stopping at its own convergence (`damped_newton_batch`); other solvers run by `vmap`.
+    stopping at its own convergence; other solvers run by `vmap`.
     Batches are padded (with copies of the first member) to a power of two, rounded up to
     a multiple of the device count, so that nearby sizes share one compiled program;
     larger batches run in chunks of 128 per device, concurrently from one host thread

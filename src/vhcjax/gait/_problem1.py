@@ -483,22 +483,23 @@ def vhc_search(
     **Arguments:**
 
     - `model`: a two-DOF `WalkerModel` (e.g. `CompassGait`).
-    - `guess`: $(a_0, b_0)$. The search runs in the unknowns $(a, h)$ (`_vhc_eval_h`):
-      the guess enters with $d$ its `family` root of (5.13) (the vertex $-B/2A$ where
-      (5.13) has no real root), and the gait found is checked to be of that family
-      (`other_cycle` if its $d$ is the other root). A guess with $b_0 > 0$ (walking
-      uphill, 7.17) is searched mirrored: every velocity reversed, which leaves the
-      residual unchanged.
+    - `guess`: $(a_0, b_0)$. The guess enters with $d$ its `family` root of the energy
+      quadratic (5.13) (the vertex $-B/2A$ where (5.13) has no real root), and the gait
+      found is checked to be of that family (`other_cycle` if its $d$ is the other
+      root). Near the gait the search runs in unknowns $(a, h)$, $b$ linear in $(d, h)$
+      by the impact relations, in which the gaits lie far from a double root of (5.13)
+      (see `far`). A guess with $b_0 > 0$ (walking uphill, 7.17) is searched mirrored:
+      every velocity reversed, which leaves the residual unchanged.
     - `family`: `"stable"` (thesis selector 2) or `"unstable"` (selector 1).
-    - `solver`: `"newton"` (default: `damped_newton`, forward-mode Jacobian, steps
-      damped Levenberg-Marquardt style where a full step fails), `"lm"` (optimistix's
-      Levenberg-Marquardt only), `"optimistix"` (plain `optx.Newton`, which stalls from
-      the thesis seed (7.2) for the unstable family) or `"optax"` (L-BFGS on the squared
-      residual; slower, offered for comparison).
+    - `solver`: `"newton"` (default: the library's damped Newton method, forward-mode
+      Jacobian, steps damped Levenberg-Marquardt style where a full step fails), `"lm"`
+      (optimistix's Levenberg-Marquardt only), `"optimistix"` (plain `optx.Newton`, which
+      stalls from the thesis seed (7.2) for the unstable family) or `"optax"` (L-BFGS on
+      the squared residual; slower, offered for comparison).
     - `rtol`, `atol`, `max_steps`: of the solver.
     - `config`: `SolverConfig` of the $\\phi''$ integration.
-    - `chord`: `"newton"` only: finish with chord steps (`damped_newton`'s
-      `chord_below`): in large batches 1.6x the throughput, for one more compiled
+    - `chord`: `"newton"` only: finish with chord steps (the Jacobian kept once the
+      residual is small): in large batches 1.6x the throughput, for one more compiled
       evaluation (1.5-2.2 s more to compile).
     - `far`: `"newton"` only: from points with a residual (max-norm) above `far` and a
       relative discriminant of (5.13) above $10^{-3}$ the steps are taken in $(a, b)$,
@@ -508,7 +509,7 @@ def vhc_search(
       smaller program to compile. May be traced.
     - `axes`: searches a batch. `guess` is then `(B, 2)` and `axes` gives the batch axis
       of each of `model`'s leaves (`0` or `None`, as `jax.vmap`'s `in_axes`). With
-      `"newton"` one loop iterates every member (`damped_newton_batch`).
+      `"newton"` one loop iterates every member, each stopping at its own convergence.
 
     **Returns:** a `Gait` (with a leading batch axis with `axes`).
     """

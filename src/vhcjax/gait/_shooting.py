@@ -53,12 +53,14 @@ def shooting_search(
     axes=None,
 ):
     """Solve Problem 2, $P(z) = z$ for the step-to-step map $P$ on the post-impact section
-    (`vhcjax.hybrid.step_map`), from `guess` (pure; never raises).
+    (`step_map`), from `guess` (pure; never raises).
 
-    `guess` is $(a_0, b_0, f_0)$ on the post-impact section, or $(a_0, b_0)$ completed by
-    `complete_guess` with the `family` root. `solver="newton"` uses `damped_newton`
-    (forward-mode Jacobian through the heel-strike event); `"optimistix"` uses
-    `vhcjax.hybrid.fixed_point` (plain `optx.Newton`). The `family` label is checked:
+    `guess` is $(a_0, b_0, f_0)$ on the post-impact section, or $(a_0, b_0)$, completed
+    with $d$ the `family` root of the energy quadratic (5.13) and $f$ from the impact
+    relations (5.9). `solver="newton"` uses the library's damped Newton method
+    (forward-mode Jacobian through the heel-strike event, steps damped
+    Levenberg-Marquardt style where a full step fails); `"optimistix"` uses
+    `fixed_point` (plain `optx.Newton`). The `family` label is checked:
     a fixed point whose $d$ is the other root of (5.13) gets `RESULTS.other_cycle`.
     `chord`: as in `vhc_search` (1.6-1.8x the batched throughput). `axes`: a batch of guesses,
     as in `vhc_search`.

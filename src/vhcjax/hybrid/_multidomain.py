@@ -103,7 +103,7 @@ class MultiDomainModel(WalkerModel):
       (default: always); a failure ends the step with `RESULTS.fell`.
     - `domain_constraint(i)`: optional constant matrix $A$ of the joints locked in
       domain `i` ($A q$ and $A\\dot q$ constant there), or `None` (default). The
-      transverse linearization (`vhcjax.control`) works on the remaining coordinates.
+      transverse linearization of the controllers (`stabilize`) works on the remaining coordinates.
 
     The section (`section_to_state`) lies at the start of domain 0.
     """
@@ -142,9 +142,15 @@ class MultiDomainModel(WalkerModel):
         )
 
     def hybrid_step(self, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None, vector_field=None):
-        """One full cycle (all domains) from a post-heel-strike state; the hook called by
-        `vhcjax.hybrid.step_unchecked`. Same contract as `vhcjax.hybrid.step_unchecked`: returns a `StepResult`.
-        (`vector_field` overrides are single-domain only and are ignored here.)"""
+        """One full cycle (all domains) from a post-heel-strike state: what `step`,
+        `simulate` and everything built on them run for this model. Returns a `StepResult`
+        with result codes (never raises). `vector_field` must be `None`: a multi-domain
+        model takes one field per domain (`multidomain_step`'s `fields`)."""
+        if vector_field is not None:
+            raise ValueError(
+                "a multi-domain model has one vector field per domain: pass them as "
+                "`multidomain_step(model, x0, ..., fields=...)`"
+            )
         return multidomain_step(self, x0, config, alive, adjoint)[0]
 
 
@@ -197,7 +203,7 @@ def multidomain_step(model, x0, config=DEFAULT_CONFIG, alive=True, adjoint=None,
     """One cycle of a `MultiDomainModel` through all its domains.
 
     `fields`: optional vector fields `(t, x, args) -> xdot`, one per domain, replacing
-    the model's (e.g. the walker under a feedback law, `vhcjax.control`).
+    the model's (e.g. the walker under a feedback law, as `closed_loop_step` runs it).
 
     **Returns:** `(StepResult, DomainInfo)`; the `StepResult` has the pre-heel-strike state
     as `x_minus`, the total cycle time as `period` and the heel-strike impulse.

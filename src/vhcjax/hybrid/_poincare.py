@@ -50,8 +50,8 @@ def _step_map(model, z, k, config):
 def step_map(model, z, k=1, config=DEFAULT_CONFIG):
     """$P^k(z)$: `k` steps of the hybrid simulation from section coordinates `z`.
 
-    One compiled program per model class, `k` and `config` (a stored program, see
-    `vhcjax._programs`); traced into the caller's program under `jit`, `vmap` or a
+    One compiled program per model class, `k` and `config` (a stored program, kept
+    on disk for later processes: see `enable_compilation_cache`); traced into the caller's program under `jit`, `vmap` or a
     derivative.
     """
     return _step_map(model, jnp.asarray(z, dtype=float), check_map_steps(k), config)
@@ -191,12 +191,12 @@ def fixed_point(model, z0, k=1, *, rtol=1e-12, atol=1e-12, max_steps=40, config=
     """Solve $P^k(z) = z$ by Newton (optimistix) with forward-mode Jacobians (Problem 2).
 
     The search is one compiled program per model class and static arguments (a stored
-    program, see `vhcjax._programs`). A failed search raises nothing: inspect `result`
+    program: see `enable_compilation_cache`). A failed search raises nothing: inspect `result`
     (use under `vmap` freely); an invalid model is coded `bad_input` without a search;
     only a `k` that is not a positive integer or a `z0` of the wrong shape is a
     `ValueError`. Differentiable with respect to the model's parameters (`jax.jvp`,
     `jax.jacfwd`, `jax.grad`, `jax.jacrev`) by the implicit function theorem at the fixed
-    point (`vhcjax.solvers.implicit_outputs`), never through the Newton iterations: the
+    point, never through the Newton iterations: the
     derivatives run the same compiled search (on the parameters' values) and compile only
     the implicit-derivative program. A failed search has zero derivatives.
     """

@@ -462,8 +462,9 @@ def _simulate_many(model, x0, num_steps, config):
 def simulate_batch(model, x0, num_steps, *, config=DEFAULT_CONFIG, mesh=None):
     """Simulate a batch of walkers of one model, spread over all devices.
 
-    The batch is padded (`_batching.padded_map`) and split over the `"batch"` axis of
-    `mesh` (default: all local devices, e.g. several GPUs). On a CPU, where XLA runs one
+    The batch is padded (to a power of two: nearby sizes share one compiled program) and
+    split over the `"batch"` axis of `mesh` (default: all local devices, e.g. several
+    GPUs). On a CPU, where XLA runs one
     program on one core, the batch is also cut into one chunk per core, run concurrently
     from host threads (`VHCJAX_HOST_WORKERS` sets their number). Results agree with
     unbatched `simulate` calls to rounding.

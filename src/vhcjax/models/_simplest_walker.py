@@ -119,7 +119,7 @@ class SimplestWalker(WalkerModel):
 
         The mass matrix of the energies is singular here (the swing leg has no mass), so
         the generic forward dynamics $M^{-1}(\\tau - C\\dot q - G)$ of
-        `vhcjax.mechanics.acceleration` cannot be used: the swing-leg equation is the
+        `vhcjax.acceleration` cannot be used: the swing-leg equation is the
         $m \\to 0$ limit of the foot's own equation of motion, divided by $m$.
 
         **Arguments:**

@@ -98,8 +98,8 @@ def atlas(
     - `mass_leg` (kg), `leg_length` (m), `gravity` (m/s^2): the scales (they do not
       change the slopes or the spectral radius).
     - `psi_start`, `psi_max`, `step`: the slope scan (rad); `tol`: of the flip slopes
-      (rad). The gaits at `psi_start` are continued from the default model's (`seed_gaits`,
-      by `find_gaits` with `method`).
+      (rad). The gaits at `psi_start` are continued from the default model's (by
+      `find_gaits` with `method`, without guesses).
 
     **Returns:** an `Atlas`.
     """

@@ -229,7 +229,7 @@ def max_converging_perturbation(
     config=BASIN_CONFIG,
     progress=None,
 ):
-    """Largest perturbation $r$ along each unit `direction` (rows, section coordinates)
+    """Largest perturbation $r$ along each unit direction (rows of `directions`, section coordinates)
     for which $z^* + r d$ still converges to the gait, by batched bisection on
     $[0, r_{max}]$.
 

@@ -90,7 +90,7 @@ def _implicit(model, z, config):
 
 def slope_sensitivity(model, z_star, *, config=DEFAULT_CONFIG):
     """Derivatives with respect to the slope of the gait through `z_star` (a fixed point
-    of the step map of `model`, e.g. from `vhcjax.hybrid.fixed_point`).
+    of the step map of `model`, e.g. from `vhcjax.fixed_point`).
 
     **Returns:** a `SlopeSensitivity`. The eigen-decomposition runs on the host (numpy).
     A `z_star` that one step does not return to (`GAIT_TOL`) raises a `ValueError`.

@@ -22,8 +22,8 @@ class BifurcationDiagram(eqx.Module):
       zero after a fall).
     - `fell` (B,): the walker did not complete all steps.
     - `result` (B,): first failure code per slope.
-    - `period_pattern` (B,): `detect_period` of the recorded step periods: 1, 2, 4, ...
-      steps per repetition, 0 if aperiodic (chaotic or not settled), -1 where it fell.
+    - `period_pattern` (B,): how often the recorded step periods repeat (to 1e-5 s):
+      1, 2, 4, ... steps per repetition, 0 if aperiodic (chaotic or not settled), -1 where it fell.
     """
 
     psi: np.ndarray
@@ -62,8 +62,8 @@ def bifurcation_diagram(
     gaits (past the flip) leave towards the attractor. Default tolerance: `FAST_CONFIG`
     (rtol = atol = 1e-8). `chunk`: largest batch of one call (default: 256 when the
     chunks run one per CPU core at a time, else the whole batch). The chunks are padded
-    (`_batching.padded_map`) and split over the devices of `mesh` (default: all local
-    devices).
+    to a power of two (nearby sizes share one compiled program) and split over the devices
+    of `mesh` (default: all local devices).
     """
     model = CompassGait() if model is None else model
     psis = np.asarray(psis, float).reshape(-1)

@@ -39,7 +39,7 @@ def period1_family(
     Problem 2); `"vhc"` and `"shooting"` use one of them throughout.
 
     The sweep needs no seed and solves every gait to 1e-12. A slope that is not finite
-    and positive (at least `vhcjax.gait.MIN_SLOPE`, 1e-6 rad) gets the code `bad_input`;
+    and positive (at least 1e-6 rad) gets the code `bad_input`;
     another model than a compass gait raises `TypeError`.
 
     **Returns:** a `Family`; `z` holds the section coordinates $(q_1, \\dot q_1,

@@ -70,7 +70,12 @@ def to_midswing(model, z, config=DEFAULT_CONFIG):
 @stored_jit
 def midswing_multipliers(model, z, config=DEFAULT_CONFIG):
     """Multipliers of the gait through post-impact `z`, computed on the mid-swing section
-    $q_1 = 0$ (jacfwd of `midswing_map`). **Returns:** `(multipliers, w, ok)`."""
+    $q_1 = 0$: the forward-mode Jacobian of the return map from mid-swing to the next
+    mid-swing, a check of the multipliers on the post-impact section.
+
+    **Returns:** `(multipliers, w, ok)`: the multipliers, the gait's mid-swing section
+    point $w = (q_2, \\dot q_1, \\dot q_2)$ at $q_1 = 0$, and whether every swing of the
+    computation reached its event."""
     w, ok0 = to_midswing(model, z, config)
     J = jax.jacfwd(lambda ww: midswing_map(model, ww, config)[0])(w)
     _, ok = midswing_map(model, w, config)

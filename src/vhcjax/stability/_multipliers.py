@@ -202,8 +202,8 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, transverse=Tru
     """`gait_multipliers` for many slopes in one batched (`vmap`) call.
 
     `psis` (B,) in rad, `zs` (B, 2n-1) the gaits there. Returns a batched
-    `GaitMultipliers`. The batch runs in padded chunks (`_batching.padded_map`: a power of
-    two up to 256 members, so that nearby sizes share one compilation; one chunk per CPU
+    `GaitMultipliers`. The batch runs in padded chunks (a power of two up to 256
+    members, so that nearby sizes share one compilation; one chunk per CPU
     core at a time), split over the devices of `mesh` (default: all local devices). A
     host-side function (concrete inputs; the result's leaves are numpy arrays); under
     `jit` or a derivative, `vmap` `gait_multipliers` instead.

@@ -22,8 +22,14 @@ def _flip_function(model, psi, z0, config, k=1):
 
 
 class PeriodDoubling(eqx.Module):
-    """A flip bifurcation: `psi` (rad), `z` (the period-1 gait there), `multipliers`
-    (Poincare, at `psi`; one of them is $-1$), `bracket` (rad), `iterations`."""
+    """A flip (period-doubling) bifurcation, as `period_doubling_slope` locates it.
+
+    - `psi`: the slope of the flip (rad).
+    - `z`: the period-`k` gait there (post-impact section coordinates).
+    - `multipliers`: its Poincare multipliers at `psi` (one of them is $-1$).
+    - `bracket`: the last slope bracket `(lo, hi)` (rad).
+    - `iterations`: regula falsi iterations taken.
+    """
 
     psi: float
     z: np.ndarray

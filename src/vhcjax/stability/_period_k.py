@@ -43,8 +43,9 @@ def settle(model, z0, num_steps=400, config=FAST_CONFIG):
 
 
 def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG, *, iterations=20, h=1e-6):
-    """Newton on $P^k(z) = z$ from `z0` (e.g. from `settle`), with multipliers of $P^k$
-    by autodiff and by central finite differences.
+    """Newton on $P^k(z) = z$ from `z0` (e.g. the section point after many steps of
+    `simulate` on an attractor), with multipliers of $P^k$ by autodiff and by central
+    finite differences.
 
     $P^k$ and its Jacobian are composed from $k$ one-step maps and one-step Jacobians
     (autodiff through each heel strike): the compiled one-step programs serve every $k$.
