@@ -131,6 +131,8 @@ from .robustness import (
     BasinVolume as BasinVolume,
     Contraction as Contraction,
     FloorStepCompassGait as FloorStepCompassGait,
+    GaitSensitivity as GaitSensitivity,
+    PushThresholds as PushThresholds,
     Recovery as Recovery,
     SlopeSensitivity as SlopeSensitivity,
     Threshold as Threshold,
@@ -157,8 +159,10 @@ from .robustness import (
 # ---- differentiable gaits: multipliers with derivatives, walker design, the parameter atlas ----
 from .stability import (  # noqa: E402
     BifurcationDiagram as BifurcationDiagram,
+    Family as Family,
     GaitMultipliers as GaitMultipliers,
     GaitSpectrum as GaitSpectrum,
+    PeriodDoubling as PeriodDoubling,
     TransverseLinearization as TransverseLinearization,
     bifurcation_diagram as bifurcation_diagram,
     family_multipliers as family_multipliers,
