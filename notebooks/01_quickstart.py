@@ -57,6 +57,10 @@ for name in np.unique(names):
     print(f"{name:>12s}: {np.sum(names == name)}")
 
 # %% [markdown]
+# Each walker's result code names what ended it: `successful` (all 10 steps walked),
+# `fell`, or `bad_impact` (a heel strike whose contact impulse would pull the new stance
+# foot into the ground: no physical step).
+#
 # Figures (thesis Figs 7.2-7.4) and the walker animation (Fig 3.5).
 
 # %%
@@ -80,3 +84,8 @@ for name, fn in (
     path = os.path.join(OUT, f"01_{name}.png")
     fn(sim, path=path, case=case)
     print("wrote", path)
+
+# The animation: the 8 simulated steps in real time, 60 frames (a GIF written by Pillow).
+path = os.path.join(OUT, "01_walker.gif")
+frames = plotting.animate(sim, model, path, max_frames=60)
+print("wrote", path, f"({frames} frames)")

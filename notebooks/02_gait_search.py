@@ -112,10 +112,9 @@ for f, gg in fams.items():
 # repository.
 import tempfile
 
-from vhcjax.plotting._gait import plot_sweep  # noqa: E402
-
 OUT = os.environ.get("VHCJAX_NOTEBOOK_OUT") or tempfile.mkdtemp(prefix="vhcjax_notebook_")
 os.makedirs(OUT, exist_ok=True)
 sweeps = {f: vj.Sweep(jnp.radians(sl), gg) for f, gg in fams.items()}
-plot_sweep(sweeps, os.path.join(OUT, "02_families.png"))
-print("wrote", os.path.join(OUT, "02_families.png"))
+path = os.path.join(OUT, "02_families.png")
+vj.plotting.plot_sweep(sweeps, path)
+print("wrote", path)

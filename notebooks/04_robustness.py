@@ -25,8 +25,7 @@ import jax.numpy as jnp
 import numpy as np
 
 import vhcjax as vj
-from vhcjax.plotting._robustness import plot_basin, plot_push, plot_slope
-from vhcjax.robustness._push import max_push, push_sensitivity_autodiff
+from vhcjax import plotting
 
 FULL = os.environ.get("VHCJAX_FULL") == "1"
 # Figures go to $VHCJAX_NOTEBOOK_OUT, or to a fresh temporary folder: never into the
@@ -64,11 +63,14 @@ b = vj.basin_slice(
     chunk=1024 if FULL else 81,
 )
 print(f"converging fraction {b.fraction:.3f}, area {b.area:.4g} rad^2/s")
-print(
-    "largest converging offsets along the grid lines:",
-    {k: round(float(v), 4) for k, v in b.max_converging.items()},
-)
-plot_basin(b, os.path.join(OUT, "04_basin.png"))
+print("largest offsets from the gait up to which every grid point converges:")
+for key, name, unit in (("x", "q1", "rad"), ("y", "dq1", "rad/s")):
+    print(
+        f"  {name}: {b.max_converging['-' + key]:.4f} {unit} down, {b.max_converging['+' + key]:.4f} {unit} up"
+    )
+path = os.path.join(OUT, "04_basin.png")
+plotting.plot_basin(b, path, case="stable gait, 3 deg")
+print("wrote", path)
 
 # %% [markdown]
 # ## Pushes at the hip
@@ -79,8 +81,8 @@ plot_basin(b, os.path.join(OUT, "04_basin.png"))
 # %%
 phases = np.arange(20 if FULL else 3) / (20 if FULL else 3)
 angles = np.radians([0.0, 90.0, 180.0, 270.0] if FULL else [0.0, 180.0])
-D = np.asarray(push_sensitivity_autodiff(model, x_star, T, jnp.asarray(phases)))
-res = max_push(
+D = np.asarray(vj.push_sensitivity_autodiff(model, x_star, T, jnp.asarray(phases)))
+res = vj.max_push(
     model,
     x_star,
     T,
@@ -90,12 +92,15 @@ res = max_push(
     iterations=12 if FULL else 4,
     scan=8 if FULL else 3,
 )
+print("largest impulse survived (N s) at phase s of the step:")
 for j, a in enumerate(angles):
-    print(
-        f"direction {math.degrees(a):5.0f} deg: largest impulse survived (N s) "
-        f"{np.round(res.largest[:, j], 3)}"
-    )
-plot_push(phases, D, angles, res.largest, os.path.join(OUT, "04_push.png"), p_max=20.0)
+    cells = ", ".join(f"s = {s:.2f}: {p:.3f}" for s, p in zip(phases, res.largest[:, j]))
+    deg = round(math.degrees(a))
+    way = {0: "forward", 90: "up", 180: "backward", 270: "down"}[deg]
+    print(f"  {way} ({deg} deg): {cells}")
+path = os.path.join(OUT, "04_push.png")
+plotting.plot_push(phases, D, angles, res.largest, path, p_max=20.0)
+print("wrote", path)
 
 # %% [markdown]
 # ## Sensitivity to the slope (full mode)
@@ -107,5 +112,6 @@ plot_push(phases, D, angles, res.largest, os.path.join(OUT, "04_push.png"), p_ma
 if FULL:
     sens = vj.slope_sensitivity(model, z_star)
     print("dz*/dpsi =", np.asarray(sens.dz), " dT/dpsi =", float(sens.dperiod))
-    plot_slope(sens, os.path.join(OUT, "04_slope.png"))
-print("wrote figures to", OUT)
+    path = os.path.join(OUT, "04_slope.png")
+    plotting.plot_slope(sens, path)
+    print("wrote", path)

@@ -107,8 +107,9 @@ print(
 assert sim.result == vj.RESULTS.successful and dist[-1] < 1e-6 * max(dist[0], 1.0)
 
 # %% [markdown]
-# ## Stability: Poincare multipliers (autodiff through the events), finite differences,
-# and the transverse linearization (thesis ch. 6, generic in n)
+# ## Stability, three ways
+# Poincare multipliers (autodiff through the events), checked by finite differences and
+# by the transverse linearization (thesis ch. 6, generic in n).
 
 # %%
 J = vj.poincare_jacobian(model, fp.z)
@@ -140,10 +141,24 @@ assert np.abs(ev_sorted(tl.multipliers) - ev_sorted(ev)).max() < 1e-6
 
 # %% [markdown]
 # ## A basin slice (section coordinates q1, dq1)
+# Start points on a grid around the gait just after impact, each simulated for up to 40
+# steps and labelled by where it went: back to the gait, fell, another cycle, or
+# undecided.
 
 # %%
-n = 41 if FULL else 5
+import tempfile
+
+# Figures go to $VHCJAX_NOTEBOOK_OUT, or to a fresh temporary folder: never into the
+# repository.
+OUT = os.environ.get("VHCJAX_NOTEBOOK_OUT") or tempfile.mkdtemp(prefix="vhcjax_05_")
+os.makedirs(OUT, exist_ok=True)
+
+n = 41 if FULL else 9
 bs = vj.basin_slice(model, fp.z, axes=(0, 1), half_widths=(0.02, 0.1), shape=(n, n), num_steps=40)
-assert bs.label[n // 2, n // 2] == vj.CONVERGED if hasattr(vj, "CONVERGED") else True
-print(f"basin slice {n}x{n}: fraction converged {bs.fraction:.2f}")
-print(np.asarray(bs.label))
+assert bs.label[n // 2, n // 2] == vj.CONVERGED  # the gait itself
+counts = {name: int(np.sum(bs.label == code)) for code, name in enumerate(vj.LABEL_NAMES)}
+print(f"basin slice, {n} x {n} start points:", ", ".join(f"{k} {v}" for k, v in counts.items()))
+print(f"fraction back at the gait: {bs.fraction:.2f}")
+path = os.path.join(OUT, "05_basin.png")
+vj.plotting.plot_basin(bs, path, case="rod-legged walker, 0.03 rad")
+print("wrote", path)

@@ -71,7 +71,7 @@ res = vj.design(
     steps=40 if FULL else 6,
     learning_rate=0.1,
 )
-print(res.result, "after", res.iterations, "iterations")
+print(f"design stopped ({res.result}) after {res.iterations} iterations")
 print(
     "start  ",
     {k: round(v, 4) for k, v in res.initial["params"].items()},
@@ -138,7 +138,10 @@ fig.savefig(os.path.join(OUT, "07_design.png"))
 mu = np.linspace(1.0, 4.0, 7 if FULL else 2)
 beta = np.linspace(0.7, 1.3, 7 if FULL else 2)
 at = vj.atlas(mu, beta, slope=math.radians(3.0))
-print(np.round(np.degrees(at.flip_slope), 4))
+for i, m in enumerate(mu):
+    for j, b in enumerate(beta):
+        flip = np.degrees(at.flip_slope[i, j])
+        print(f"mH/m = {m:.2f}, b/a = {b:.2f}: the stable gait period-doubles at {flip:.4f} deg")
 
 fig, ax = plt.subplots(figsize=(6, 4.5))
 mesh = ax.pcolormesh(mu, beta, np.degrees(at.flip_slope).T, shading="nearest")

@@ -127,6 +127,10 @@ from .parameters import (  # noqa: E402
 # ---- robustness: contraction, basin of attraction, slope/terrain sensitivity, pushes ----
 from .robustness import (
     CONVERGED as CONVERGED,
+    FELL as FELL,
+    LABEL_NAMES as LABEL_NAMES,
+    OTHER_CYCLE as OTHER_CYCLE,
+    UNDECIDED as UNDECIDED,
     BasinSlice as BasinSlice,
     BasinVolume as BasinVolume,
     Contraction as Contraction,
