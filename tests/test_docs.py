@@ -2,6 +2,8 @@
 things only, and the notebooks rendered into the site, current with their sources."""
 
 import ast
+import html as html_module
+import importlib.util
 import inspect
 import os
 import pathlib
@@ -87,20 +89,26 @@ def test_every_public_name_on_an_api_page():
     assert not missing, f"public names on no API page (docs/api/*.md): {missing}"
 
 
-def test_rendered_api_pages_show_every_public_name(tmp_path):
-    """The built site (`mkdocs build --strict`, as CI builds it) has a heading for every
-    public name: the check above, on what mkdocstrings rendered."""
+@pytest.fixture(scope="module")
+def site(tmp_path_factory):
+    """The site as CI builds it (`mkdocs build --strict`), from this source tree."""
     pytest.importorskip("mkdocs", reason="the docs extra (`pip install -e '.[docs]'`)")
-    site = tmp_path / "site"
+    out = tmp_path_factory.mktemp("site")
     env = dict(os.environ, PYTHONPATH=str(ROOT / "src"), NO_MKDOCS_2_WARNING="1")
     done = subprocess.run(
-        [sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(site)],
+        [sys.executable, "-m", "mkdocs", "build", "--strict", "-q", "-d", str(out)],
         cwd=ROOT,
         env=env,
         capture_output=True,
         text=True,
     )
     assert done.returncode == 0, done.stderr
+    return out
+
+
+def test_rendered_api_pages_show_every_public_name(site):
+    """A heading for every public name in the built API pages: the check above, on what
+    mkdocstrings rendered."""
     html = "\n".join(p.read_text() for p in (site / "api").rglob("index.html"))
     ids = set(re.findall(r'id="(vhcjax\.[A-Za-z0-9_.]+)"', html))
     missing = [
@@ -183,3 +191,101 @@ def test_docstrings_name_public_things_only():
                     if underscored or unlisted or ident in private:
                         found.append(f"{qual}: `{code}`")
     assert not found, "docstrings naming private things:\n" + "\n".join(found)
+
+
+# ---- notebooks, rendered with their outputs into the site ----
+NOTEBOOKS = sorted((ROOT / "notebooks").glob("[0-9]*.py"))
+FIGURES = ROOT / "docs" / "notebooks" / "figures"
+
+
+def _renderer():
+    spec = importlib.util.spec_from_file_location(
+        "render_notebooks", ROOT / "docs" / "render_notebooks.py"
+    )
+    assert spec is not None and spec.loader is not None
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.mark.parametrize("notebook", NOTEBOOKS, ids=lambda p: p.stem)
+def test_notebook_page_is_current(notebook):
+    """Each notebook has a rendered page, written from its present source (the page
+    records the source's SHA-256), with the figures it shows."""
+    render = _renderer()
+    page = ROOT / "docs" / "notebooks" / f"{notebook.stem}.md"
+    again = f"render it again: python docs/render_notebooks.py {notebook.stem}"
+    assert page.is_file(), again
+    text = page.read_text()
+    header = render.HEADER.format(name=notebook.name, digest=render.source_hash(notebook))
+    assert text.splitlines()[0] == header, f"{notebook.name} changed since its page: {again}"
+    for kind, cell in render.cells(notebook.read_text()):
+        assert cell in text, f"a {kind} cell of {notebook.name} is not on its page"
+    for figure in re.findall(r"\]\(figures/([^)]+)\)", text):
+        assert (FIGURES / figure).is_file(), figure
+    nav = (ROOT / "mkdocs.yml").read_text()
+    assert f"notebooks/{notebook.stem}.md" in nav, f"{page.name} is in no nav entry of mkdocs.yml"
+
+
+def test_notebook_figures_all_shown():
+    shown = {
+        f
+        for p in FIGURES.parent.glob("*.md")
+        for f in re.findall(r"\]\(figures/([^)]+)\)", p.read_text())
+    }
+    assert {p.name for p in FIGURES.iterdir()} == shown
+
+
+def test_site_holds_the_executed_notebooks(site):
+    """The built site has each notebook's page, with its printed output and figures."""
+    for notebook in NOTEBOOKS:
+        html = (site / "notebooks" / notebook.stem / "index.html").read_text()
+        page = (ROOT / "docs" / "notebooks" / f"{notebook.stem}.md").read_text()
+        for figure in re.findall(r"\]\(figures/([^)]+)\)", page):
+            assert figure in html and (site / "notebooks" / "figures" / figure).is_file()
+        printed = re.findall(r"^```text\n(.*)$", page, re.M)
+        assert printed, f"{notebook.name} printed nothing"
+        for line in printed:
+            assert html_module.escape(line, quote=False) in html, line
+
+
+@pytest.mark.parametrize("notebook", NOTEBOOKS, ids=lambda p: p.stem)
+def test_notebook_uses_public_names_only(notebook):
+    """Imports from vhcjax and attributes of its modules (`vj.find_gait`,
+    `plotting.plot_basin`) are public names: a notebook teaches what a user can rely on."""
+    public = public_names()
+    modules = {"vhcjax": vhcjax} | {
+        q: o for q, o in public.items() if isinstance(o, types.ModuleType)
+    }
+    aliases, bad = {}, []
+    tree = ast.parse(notebook.read_text())
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            for a in node.names:
+                if a.name.startswith("vhcjax"):
+                    if a.name not in modules:
+                        bad.append(f"import {a.name}")
+                    aliases[a.asname or a.name] = a.name
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("vhcjax"):
+            for a in node.names:
+                qual = f"{node.module}.{a.name}"
+                if node.module not in modules or qual not in public:
+                    bad.append(f"from {node.module} import {a.name}")
+                elif qual in modules:
+                    aliases[a.asname or a.name] = qual
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Attribute) and isinstance(node.value, ast.Name):
+            module = aliases.get(node.value.id)
+            if module is not None and f"{module}.{node.attr}" not in public:
+                bad.append(f"{node.value.id}.{node.attr}")
+        if (
+            isinstance(node, ast.Attribute)
+            and isinstance(node.value, ast.Attribute)
+            and isinstance(node.value.value, ast.Name)
+            and aliases.get(node.value.value.id) == "vhcjax"
+        ):
+            module = f"vhcjax.{node.value.attr}"
+            if module in modules and f"{module}.{node.attr}" not in public:
+                bad.append(f"{node.value.value.id}.{node.value.attr}.{node.attr}")
+    assert aliases, f"{notebook.name} does not import vhcjax"
+    assert not bad, f"{notebook.name} uses names that are not public: {bad}"
