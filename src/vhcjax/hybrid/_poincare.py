@@ -70,8 +70,8 @@ def _jacobian_of(z, model, k, config):
 def jacobian(model, z, k=1, config=DEFAULT_CONFIG):
     """$\\partial P^k / \\partial z$ by forward-mode autodiff through the events (a stored
     program, as `step_map`). Differentiable in forward and reverse mode (`jax.grad`):
-    its own derivatives come from a forward-mode Jacobian
-    (`vhcjax.solvers.linearised`), never from reverse mode through the ODE solves."""
+    its own derivatives come from a forward-mode Jacobian times the tangents (linear,
+    so reverse mode transposes it), never from reverse mode through the ODE solves."""
     z = jnp.asarray(z, dtype=float)
     return linearised(_jacobian_of, check_map_steps(k), config)(z, model)
 
