@@ -30,7 +30,10 @@ SUBCOMMANDS = [
     "_simulate",
     "_gait",  # gait, sweep
     "_bifurcation",  # bifurcation, multipliers
-    "_robustness",  # contraction, basin, slope-sensitivity, push
+    "_contraction",
+    "_basin",
+    "_slope_sensitivity",
+    "_push",
     "_stabilize",  # stabilize (transverse-linearization feedback)
     "_design",  # design, atlas
     "_reproduce",  # reproduce (thesis chapter 7 report)

@@ -1,0 +1,200 @@
+"""`vhcjax push`: sensitivity of a gait to hip pushes along the step, and the largest
+push survived."""
+
+from ._analysed import add_analysis_flags, analysed_gait, progress_bar, report_stability
+from ._common import (
+    FINITE,
+    CLIError,
+    check_figure_file,
+    count,
+    describe,
+    figure_output,
+    number,
+    print_json,
+    warn,
+)
+
+
+def register(subparsers):
+    p = subparsers.add_parser(
+        "push",
+        help="sensitivity to hip pushes along the gait; largest push survived",
+        description="Linear sensitivity of the next post-impact state to a hip impulse as a "
+        "function of the phase of the step (autodiff; with --check also the transverse "
+        "linearization), and the largest push survived per phase and direction.",
+    )
+    add_analysis_flags(p, "save sensitivity and largest push vs phase")
+    p.add_argument(
+        "--phases", type=count(1, 10_000), default=20, help="phases in [0, 1) (default 20)"
+    )
+    p.add_argument(
+        "--directions-deg",
+        type=FINITE,
+        nargs="+",
+        default=[0, 90, 180, 270],
+        help="push directions, degrees from forward, counter-clockwise",
+    )
+    p.add_argument(
+        "--duration",
+        type=number(float, lo=0.0, hi=10.0),
+        default=0.0,
+        help="pulse duration in s (0: instantaneous impulse, magnitudes in N s)",
+    )
+    p.add_argument(
+        "--max",
+        type=number(float, lo=0.0, hi=1e6, lo_open=True),
+        default=None,
+        help="bisection upper bound (N s, or N with --duration; default 20 for the "
+        "thesis's 20 kg walker, in proportion to the walker's own impulse or force unit)",
+    )
+    p.add_argument(
+        "--iterations", type=count(1, 60), default=12, help="bisection halvings (1 to 60)"
+    )
+    p.add_argument("--steps", type=count(1, 100_000), default=30, help="steps after the push")
+    p.add_argument(
+        "--check",
+        action="store_true",
+        help="also compute the sensitivity by transverse linearization",
+    )
+    p.set_defaults(func=run_push)
+
+
+#: Most largest-push searches (phases x directions) of one `push` command.
+MAX_PUSHES = 10_000
+
+
+def run_push(args):
+    import jax.numpy as jnp
+    import numpy as np
+
+    from ..robustness import (
+        UNDECIDED,
+        max_push,
+        pulse_past_strike,
+        push_bound,
+        push_sensitivity_autodiff,
+        push_sensitivity_transverse,
+    )
+
+    check_figure_file(args.png, "--png")
+    pushes = args.phases * len(args.directions_deg)
+    if pushes > MAX_PUSHES:
+        raise CLIError(
+            f"--phases {args.phases} x {len(args.directions_deg)} --directions-deg gives "
+            f"{pushes:,} largest-push searches (bisections); at most {MAX_PUSHES:,}"
+        )
+    model, z, x_star, period, zn = analysed_gait(args)
+    phases = np.arange(args.phases) / args.phases
+    late = pulse_past_strike(phases, period, args.duration)
+    if late:
+        raise CLIError(f"--duration: {late}")
+    angles = np.radians(np.asarray(args.directions_deg, float))
+    D = push_sensitivity_autodiff(model, x_star, period, jnp.asarray(phases))
+    out = {"gait": zn, "period": period, "phases": phases, "sensitivity_dxplus_dP": D}
+    report_stability(
+        args,
+        model,
+        z,
+        out,
+        "even an unpushed walker perturbed by rounding leaves it, so the largest push "
+        "survived measures the step budget (--steps), not robustness",
+    )
+    if args.check:
+        from ..hybrid import step
+
+        xm = step(model, x_star).x_minus
+        Z, lin = push_sensitivity_transverse(model, x_star, xm, period, jnp.asarray(phases))
+        zad = np.einsum("ij,sjk->sik", np.asarray(lin.P_plus), np.asarray(D))
+        out["transverse_dzeta_dP"] = Z
+        out["max_abs_difference_autodiff_vs_transverse"] = float(np.max(np.abs(zad - Z)))
+    if args.max is None:
+        args.max = float(f"{push_bound(model, args.duration):.12g}")  # 20, not 20.000000000000004
+    res = max_push(
+        model,
+        x_star,
+        period,
+        phases,
+        angles,
+        p_max=args.max,
+        duration=args.duration,
+        iterations=args.iterations,
+        num_steps=args.steps,
+        progress=progress_bar(args),
+    )
+    unit = "N s" if args.duration == 0 else "N"
+    out.update(
+        {
+            "directions_deg": args.directions_deg,
+            "unit": unit,
+            "largest": res.largest,
+            "falls_at": res.threshold.hi.reshape(res.largest.shape),
+            "most_fragile_phase": res.most_fragile_phase,
+        }
+    )
+    # Pairs where the push of --max was survived (and none of the scan below it failed):
+    # `falls_at` is null, and `largest` is the bound of the search, not the walker's limit.
+    top = np.asarray(res.threshold.survives_max) & ~np.asarray(res.threshold.fails_min)
+    ceiling = int(np.sum(top))
+    if ceiling:
+        reason = (
+            f"at {ceiling} of {res.threshold.hi.size} (phase, direction) pairs the push of "
+            f"--max {args.max:g} {unit} was survived (and none tried below it failed): "
+            "`largest` is a lower bound there; raise --max to find the limit"
+        )
+        out["falls_at_reason"] = reason
+        warn(args, reason)
+    if not np.isfinite(res.most_fragile_phase).all():
+        out["most_fragile_phase_reason"] = (
+            "null for a direction where no push survived at any phase, or where every "
+            "phase survived --max: no phase is known to be the most fragile"
+        )
+    # First failing pushes that neither fell nor recovered within --steps: there the
+    # threshold measures the step budget, not the walker; say so (as slope-sensitivity).
+    slow = int(np.sum(res.threshold.hi_label == UNDECIDED))
+    if slow:
+        reason = (
+            f"at {slow} of {res.threshold.hi.size} (phase, direction) pairs the first failing "
+            f"push neither fell nor returned to the gait within --steps {args.steps}: raise "
+            "--steps to measure the walker"
+        )
+        out["largest_reason"] = reason
+        warn(args, reason)
+    if args.png:
+        from ..plotting import plot_push
+
+        with figure_output(args.png) as fh:
+            plot_push(
+                phases,
+                D,
+                angles,
+                res.largest,
+                fh,
+                unit,
+                p_max=args.max,
+                case=f"gait at {describe(args)}",
+            )
+    if args.json:
+        print_json(out)
+    else:
+        for j, a in enumerate(args.directions_deg):
+            col = res.largest[:, j]
+            col = col[np.isfinite(col)]
+            if col.size == 0:
+                print(f"direction {a:g} deg: no push survived at any phase, not even 0 {unit}")
+                continue
+            fragile = res.most_fragile_phase[j]
+            print(
+                f"direction {a:g} deg: largest push survived {col.min():.4g}-"
+                f"{col.max():.4g} {unit}; "
+                + (
+                    f"most fragile at phase {fragile:.2f}"
+                    if np.isfinite(fragile)
+                    else f"no phase known as the most fragile (--max {args.max:g} {unit} "
+                    "bounds the search)"
+                )
+            )
+        if args.check:
+            print(
+                "autodiff vs transverse linearization: max difference "
+                f"{out['max_abs_difference_autodiff_vs_transverse']:.2e}"
+            )

@@ -1,0 +1,136 @@
+"""`vhcjax slope-sensitivity`: derivatives of a gait with respect to the slope, and
+the floor steps it survives."""
+
+import math
+
+from ._analysed import (
+    add_analysis_flags,
+    analysed_gait,
+    progress_bar,
+    report_stability,
+)
+from ._common import (
+    check_figure_file,
+    count,
+    describe,
+    figure_output,
+    number,
+    print_json,
+    second_figure,
+    warn,
+)
+
+
+def register(subparsers):
+    p = subparsers.add_parser(
+        "slope-sensitivity",
+        help="derivatives w.r.t. the slope; floor-step disturbances",
+        description="Derivatives of the gait, period, speed and multipliers with respect to "
+        "the slope (implicit differentiation), the largest single step up/down survived, "
+        "recovery curves and the gait sensitivity norm for floor-height disturbances.",
+    )
+    add_analysis_flags(
+        p,
+        "save the recovery after floor steps (and the derivatives beside it, in "
+        "STEM-slope.EXT: out.svg gives out-slope.svg)",
+    )
+    p.add_argument(
+        "--heights-mm",
+        type=number(float, lo=-500.0, hi=500.0),
+        nargs="+",
+        default=[-15, -12, -5, 2, 5],
+        help="floor steps (mm, + up) for the recovery curves",
+    )
+    p.add_argument("--steps", type=count(1, 100_000), default=40, help="steps after the floor step")
+    p.add_argument(
+        "--no-derivatives",
+        action="store_true",
+        help="skip the slope derivatives (long first compilation)",
+    )
+    p.set_defaults(func=run_slope)
+
+
+def run_slope(args):
+    import jax.numpy as jnp
+    import numpy as np
+
+    from ..robustness import UNDECIDED, gait_sensitivity_norm, max_floor_step, terrain_recovery
+
+    check_figure_file(args.png, "--png")
+    slope_png = None  # the second figure (derivatives), beside the first
+    if args.png and not args.no_derivatives:
+        slope_png = second_figure(args.png, "slope", "--png")
+        check_figure_file(slope_png, "--png (its second figure)")
+    model, z, x_star, period, zn = analysed_gait(args)
+    out = {"gait": zn, "period": period}
+    if not args.no_derivatives:
+        from ..robustness import slope_sensitivity
+
+        s = slope_sensitivity(model, z)
+        out["per_rad"] = {
+            "dz": s.dz,
+            "dperiod": s.dperiod,
+            "dstep_length": s.dstep_length,
+            "dspeed": s.dspeed,
+            "dmultipliers": s.dmultipliers,
+            "dmodulus": s.dmodulus,
+        }
+        out["values"] = {
+            "step_length": s.step_length,
+            "speed": s.speed,
+            "multipliers": s.multipliers,
+        }
+    g = gait_sensitivity_norm(model, x_star, args.steps)
+    out["gait_sensitivity_norm"] = g.norm
+    out["dtimes_dh"] = g.dtimes[:10]
+    report_stability(
+        args,
+        model,
+        z,
+        out,
+        "even a walker perturbed by rounding leaves it, so the largest floor step survived "
+        "measures the step budget (--steps), not robustness",
+    )
+    th = max_floor_step(model, x_star, num_steps=args.steps, progress=progress_bar(args))
+    out["max_step_down_m"] = [th.lo[0], th.hi[0]]
+    out["max_step_up_m"] = [th.lo[1], th.hi[1]]
+    # A first failing step that did not fall was too slow to recover within --steps: the
+    # threshold then measures the step budget, not the walker; say so.
+    slow = [name for name, lab in zip(("down", "up"), th.hi_label) if lab == UNDECIDED]
+    if slow:
+        reason = (
+            f"the first failing step {' and '.join(slow)} neither fell nor returned to the "
+            f"gait within --steps {args.steps}: raise --steps to measure the walker"
+        )
+        out["max_step_reason"] = reason
+        warn(args, reason)
+    hs = jnp.asarray(np.asarray(args.heights_mm) / 1000.0)
+    rec = terrain_recovery(model, x_star, hs, args.steps, 1e-4)
+    out["recovery"] = {"heights_m": hs, "label": rec.label, "steps": rec.steps}
+    if args.png:
+        from ..plotting import plot_slope, plot_terrain
+
+        full = terrain_recovery(model, x_star, hs, args.steps, 0.0, stop_when_converged=False)
+        with figure_output(args.png) as fh:
+            plot_terrain(
+                np.asarray(hs), full, period, fh, float(g.norm), case=f"gait at {describe(args)}"
+            )
+        if slope_png is not None:
+            with figure_output(slope_png) as fh:
+                plot_slope(s, fh, case=f"gait at {describe(args)}")
+    if args.json:
+        print_json(out)
+    else:
+        if "per_rad" in out:
+            d = out["per_rad"]
+            print(
+                f"per degree of slope: dT {float(d['dperiod']) * math.pi / 180:+.5f} s, "
+                f"dv {float(d['dspeed']) * math.pi / 180:+.5f} m/s, d|lambda| "
+                f"{np.round(np.asarray(d['dmodulus']) * math.pi / 180, 5)}"
+            )
+        print(f"gait sensitivity norm (floor height -> step time): {float(g.norm):.4f} s/m")
+        print(
+            f"largest step down survived: {1000 * th.lo[0]:.2f} mm (falls at "
+            f"{1000 * th.hi[0]:.2f}); step up: {1000 * th.lo[1]:.2f} mm (falls at "
+            f"{1000 * th.hi[1]:.2f})"
+        )
