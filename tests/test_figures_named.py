@@ -169,3 +169,68 @@ def test_figure_draws_what_its_name_says(name):
         assert any(CASE in t for t in titles), (name, titles)
     finally:
         plt.close(fig)
+
+
+@pytest.mark.parametrize("name", sorted(FIGURES))
+def test_dimensionless_axes_carry_no_unit(name):
+    """A dimensionless quantity is written without a unit: no "(1)" or "(-)"."""
+    fig = FIGURES[name][0]()
+    try:
+        for ax in fig.axes:
+            for label in (ax.get_xlabel(), ax.get_ylabel()):
+                assert not label.rstrip().endswith(("(1)", "(-)")), (name, label)
+    finally:
+        plt.close(fig)
+
+
+def test_state_legends_sit_beside_the_curves():
+    """The legends of the states figure are outside its panels: they cover no peak."""
+    fig = P.plot_states(_sim(), case=CASE)
+    try:
+        fig.canvas.draw()
+        for ax in fig.axes:
+            box = ax.get_legend().get_window_extent()
+            assert box.x0 >= ax.get_window_extent().x1, "legend over the curves"
+    finally:
+        plt.close(fig)
+
+
+def _marked(line):
+    """The line draws markers (points), not only a line."""
+    return line.get_marker() not in (None, "None", "", " ")
+
+
+def test_bifurcation_marks_falls_in_a_row_of_their_own():
+    """Falls have no step period: they are drawn in a row below the diagram, not at an
+    arbitrary period in it; the period-doubling line has a legend entry."""
+    fig = P.plot_bifurcation(_bif(), flips_deg=[4.5], case=CASE, no_gait_deg=[4.1])
+    try:
+        main, row = fig.axes
+        dots = [line for line in main.lines if _marked(line)]
+        periods = np.concatenate([np.asarray(line.get_ydata(), float) for line in dots])
+        assert periods.min() >= 0.7 and not any(line.get_marker() == "x" for line in dots)
+        assert "falls" in row.get_ylabel() and "no gait" in row.get_ylabel()
+        marks = {line.get_label(): len(line.get_xdata()) for line in row.lines if _marked(line)}
+        assert marks["fell"] == 1 and marks["no gait"] == 1
+        legend = [t.get_text() for t in main.get_legend().get_texts()]
+        assert any("period doubling" in t for t in legend)
+    finally:
+        plt.close(fig)
+
+
+def test_multipliers_that_nearly_coincide_stay_visible():
+    """Every set of multipliers is drawn with open markers of its own shape and size, the
+    later ones above: the thesis's 0.123 does not hide our 0.1316 (Fig 7.1)."""
+    thesis = np.array([0.123, 0.127 - 0.586j, 0.127 + 0.586j])
+    fig = P.plot_multipliers_complex([ev, ev, thesis], ["ours", "ours again", "thesis"])
+    try:
+        points = [line for line in fig.axes[0].lines if _marked(line)]
+        assert len(points) == 3
+        assert all(line.get_markerfacecolor() == "none" for line in points)
+        assert len({line.get_marker() for line in points}) == 3
+        sizes = [line.get_markersize() for line in points]
+        assert sizes == sorted(sizes, reverse=True)
+        orders = [line.get_zorder() for line in points]
+        assert orders == sorted(orders)
+    finally:
+        plt.close(fig)

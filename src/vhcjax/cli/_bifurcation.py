@@ -263,6 +263,7 @@ def run_bifurcation(args):
                 fh,
                 flips_deg=[math.degrees(f) for f in flips],
                 case=describe(args, f"slopes {args.slope_deg} deg"),
+                no_gait_deg=missed,
             )
     if args.png_multipliers:
         from ..plotting import plot_multipliers_vs_slope

@@ -27,7 +27,7 @@ def plot_stabilization(
     reset_names=None,
 ):
     """Three panels: gains $K(s)$ against phase, recovery (error per step, closed loop and
-    passive), basin slices with and without feedback (or a note when not computed).
+    passive), basin slices with and without feedback (the last only when given).
 
     **Arguments:**
 
@@ -51,7 +51,8 @@ def plot_stabilization(
     if K.ndim == 4:  # one phase per domain: the cycle's phase runs 0..num_domains
         s = np.concatenate([i + s for i in range(domains)])
         K = K.reshape(-1, *K.shape[2:])
-    fig, axes = plt.subplots(1, 3, figsize=(15, 5.2), dpi=110)
+    panels = 2 if basin is None else 3  # no empty panel where the basin is not computed
+    fig, axes = plt.subplots(1, panels, figsize=(5 * panels, 5.2), dpi=110)
     ax = axes[0]
     styles = ("-", "--", ":")
     for i, torque in enumerate(torques):
@@ -76,9 +77,9 @@ def plot_stabilization(
                     va="top",
                     fontsize=8,
                 )
-        ax.set_xlabel("phase through the step, domain after domain (1)")
+        ax.set_xlabel("phase through the step, domain after domain")
     else:
-        ax.set_xlabel(r"phase $s = (q_1 - q_1^+)/(q_1^- - q_1^+)$ (1)")
+        ax.set_xlabel(r"phase $s = (q_1 - q_1^+)/(q_1^- - q_1^+)$")
     names = " and ".join(torques)
     ax.set_ylabel(f"{names} torque gain $K(s)$ (units in legend)")
     ax.set_title("LQR gains along the step")
@@ -89,23 +90,13 @@ def plot_stabilization(
     k = np.arange(1, len(closed_errors) + 1)
     ax.semilogy(k, np.maximum(closed_errors, 1e-16), "o-", ms=3, label="with feedback")
     ax.semilogy(k, np.maximum(passive_errors, 1e-16), "s-", ms=3, label="passive")
-    ax.set_xlabel("step (1)")
+    ax.set_xlabel("step")
     ax.set_ylabel(r"$\|z_k - z_\star\|_\infty$ after impact (rad, rad/s)")
     ax.set_title("Recovery from the perturbed gait")
     ax.legend(fontsize=8)
 
-    ax = axes[2]
-    if basin is None:
-        ax.text(
-            0.5,
-            0.5,
-            "basin not computed\n(run with --basin)",
-            ha="center",
-            va="center",
-            transform=ax.transAxes,
-        )
-        ax.set_axis_off()
-    else:
+    if basin is not None:
+        ax = axes[2]
         z = basin["z_star"]
         X = z[0] + np.asarray(basin["offsets_x"])
         Y = z[1] + np.asarray(basin["offsets_y"])
@@ -139,7 +130,7 @@ def plot_stabilization(
             f"with feedback {np.mean(basin['closed']):.2f}"
         )
         ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3)
-    fig.suptitle(title)
+    fig.suptitle(title, wrap=True)
     fig.tight_layout()
     fig.savefig(path)
     plt.close(fig)

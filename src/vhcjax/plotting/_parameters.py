@@ -10,7 +10,7 @@ from ._common import pyplot
 UNITS = {"mass-hip": "kg", "mass-leg": "kg", "a": "m", "b": "m", "gravity": "m/s^2"}
 
 _LABELS = {
-    "spectral-radius": "spectral radius (-)",
+    "spectral-radius": "spectral radius",
     "flip-slope": "flip slope (deg)",
     "speed": "speed (m/s)",
 }
@@ -52,8 +52,8 @@ def plot_design(result, path, slope_deg):
             fontsize=8,
             color="0.3",
         )
-    ax2.set_xlabel("iteration (-)")
-    ax2.set_ylabel("position within bounds (-)")
+    ax2.set_xlabel("iteration")
+    ax2.set_ylabel("position within bounds")
     ax2.legend()
     ax2.grid(alpha=0.3)
     fig.suptitle(
@@ -86,8 +86,8 @@ def plot_atlas(at, path, *, mass_leg, leg_length, gravity):
     if len(mu) > 1 and len(beta) > 1 and np.isfinite(deg).sum() > 3:
         cs = ax.contour(mu, beta, np.ma.masked_invalid(deg).T, colors="white", linewidths=0.8)
         ax.clabel(cs, fmt="%.2f", fontsize=8)
-    ax.set_xlabel(r"mass ratio $\mu = m_H / m$ (-)")
-    ax.set_ylabel(r"length ratio $\beta = b / a$ (-)")
+    ax.set_xlabel(r"mass ratio $\mu = m_H / m$")
+    ax.set_ylabel(r"length ratio $\beta = b / a$")
     ax.set_title(
         f"Compass gait: flip slope of the stable gait on a {len(mu)} x {len(beta)} "
         f"grid\nm = {mass_leg:g} kg, l = {leg_length:g} m, g = {gravity:g} m/s^2; "

@@ -53,8 +53,9 @@ def plot_states(sim, axes=None, path=None, case=None):
     """
     plt = pyplot()
     k, t, x = _completed(sim)
-    if axes is None:
-        fig, axes = plt.subplots(2, 1, figsize=(7, 5), sharex=True)
+    if axes is None:  # wider for more steps (up to 14 in), so the swings stay apart
+        width = min(14.0, 6.0 + 0.2 * k)
+        fig, axes = plt.subplots(2, 1, figsize=(width, 5), sharex=True)
     else:
         fig = axes[0].figure
     starts = _step_starts(sim, k)
@@ -65,16 +66,24 @@ def plot_states(sim, axes=None, path=None, case=None):
         for j in range(n):
             lab = f" ({names[j]})" if names[j] else ""
             colour = ("C3", "C2", "C0", "C1", "C4")[j % 5]
-            axes[0].plot(tt, x[i, :, j], colour, label=f"$q_{j + 1}${lab}" if i == 0 else None)
+            axes[0].plot(
+                tt, x[i, :, j], colour, lw=1.0, label=f"$q_{j + 1}${lab}" if i == 0 else None
+            )
             axes[1].plot(
-                tt, x[i, :, n + j], colour, label=f"$\\dot q_{j + 1}${lab}" if i == 0 else None
+                tt,
+                x[i, :, n + j],
+                colour,
+                lw=1.0,
+                label=f"$\\dot q_{j + 1}${lab}" if i == 0 else None,
             )
     axes[0].set_ylabel("angle (rad)")
     axes[1].set_ylabel("angular velocity (rad/s)")
     axes[1].set_xlabel("time (s)")
     for ax in axes:
         ax.grid(alpha=0.3)
-        ax.legend(loc="upper right", fontsize=8)
+        ax.margins(x=0.01)
+        # beside the plot, not over it: the curves' peaks stay visible
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, borderaxespad=0)
     axes[0].set_title(_title(f"States against time ({k} steps)", case), fontsize=10)
     return _done(fig, path)
 

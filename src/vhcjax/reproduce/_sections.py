@@ -741,6 +741,7 @@ def bifurcation(run, sec):
         os.path.join(run.out_dir, "bifurcation.png"),
         flips_deg=[pd],
         case="stable family, default model (thesis Table 1)",
+        no_gait_deg=slopes[~ok],
     )
     _close(fig)
     sec.figures.append("bifurcation.png")
