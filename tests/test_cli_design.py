@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from _text import assert_plain_text
 
 from vhcjax.cli import main
 
@@ -77,22 +78,21 @@ def test_bad_objective_exits_2():
 
 def test_design_json_png(tmp_path, capsys):
     png = tmp_path / "d.png"
-    rc = main(
-        [
-            "design",
-            "--objective",
-            "speed",
-            "--vary",
-            "mass-hip,a",
-            "--steps",
-            "3",
-            "--bounds",
-            "mass-hip=5:20,a=0.3:0.7",
-            "--json",
-            "--png",
-            str(png),
-        ]
-    )
+    argv = [
+        "design",
+        "--objective",
+        "speed",
+        "--vary",
+        "mass-hip,a",
+        "--steps",
+        "3",
+        "--bounds",
+        "mass-hip=5:20,a=0.3:0.7",
+        "--json",
+        "--png",
+        str(png),
+    ]
+    rc = main(argv)
     out = json.loads(capsys.readouterr().out)
     assert rc == 0
     assert DESIGN_KEYS <= set(out)
@@ -106,26 +106,18 @@ def test_design_json_png(tmp_path, capsys):
     assert steps[0] == "start" and set(steps[1:]) <= {"adam", "gradient sampling"}
     assert out["optimum"]["value"] >= out["initial"]["value"]  # speed is maximised
     assert png.stat().st_size > 10_000
+    # in words, with units (the same run again: its programs are compiled)
+    assert main(argv[: argv.index("--json")] + ["--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert_plain_text(text)
+    assert "design: maximise the speed of the stable gait at slope 3 deg" in text
+    assert " m/s -> " in text and " kg" in text and "  a: 0.5 -> " in text
 
 
 def test_atlas_json_csv_png(tmp_path, capsys):
     csv_path, png = tmp_path / "a.csv", tmp_path / "a.png"
-    rc = main(
-        [
-            "atlas",
-            "--mass-ratio",
-            "2",
-            "--length-ratio",
-            "0.9,1",
-            "--slope-deg",
-            "3",
-            "--json",
-            "--csv",
-            str(csv_path),
-            "--png",
-            str(png),
-        ]
-    )
+    argv = ["atlas", "--mass-ratio", "2", "--length-ratio", "0.9,1", "--slope-deg", "3"]
+    rc = main([*argv, "--json", "--csv", str(csv_path), "--png", str(png)])
     out = json.loads(capsys.readouterr().out)
     assert rc == 0
     assert set(out) == {"mass_ratio", "length_ratio", "cells"}
@@ -150,6 +142,11 @@ def test_atlas_json_csv_png(tmp_path, capsys):
     assert png.stat().st_size > 10_000
     assert "NaN" not in json.dumps(out) and "Infinity" not in json.dumps(out)
     assert np.isfinite(float(rows[0]["spectral_radius"]))
+    # in words, one line per cell (the same programs)
+    assert main([*argv, "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert_plain_text(text)
+    assert "found in 2 of 2 cells" in text and "mu 2, beta 1: flip at 4.3909" in text
 
 
 def test_ratio_ranges_never_pass_stop():

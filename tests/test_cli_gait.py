@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from _text import assert_plain_text
 
 import vhcjax as vj
 from vhcjax import gait as G
@@ -59,6 +60,29 @@ def test_gait_json(capsys):
         sorted(np.abs(ev[:, 0] + 1j * ev[:, 1])), sorted(np.abs(fd)), atol=1e-6
     )
     assert out["max_abs_multiplier"] == pytest.approx(max(np.abs(fd)), abs=1e-6)
+
+
+def test_gait_text_names_every_number_and_shows_the_transverse_multipliers(capsys):
+    """Without --json: the gait parameters with units and meaning, the verdict with its
+    reason, and with --transverse the transverse multipliers beside the Poincare ones."""
+    assert main(["gait", "--slope-deg", "3", "--quiet"]) == 0
+    plain = capsys.readouterr().out
+    assert_plain_text(plain)
+    assert "a =  0.218668803 rad    q1 just after impact" in plain
+    assert "T =  0.734346391 s      step period" in plain
+    assert "verdict: stable (largest multiplier modulus 0.579952 < 1)" in plain
+    assert "transverse" not in plain
+    assert main(["gait", "--slope-deg", "3", "--transverse", "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert_plain_text(text)
+    assert "multipliers (transverse linearization): -0.199726 + 0.544476i" in text
+    assert "the two computations agree to" in text
+    # `multipliers` runs the same programs: a table of both computations, with moduli
+    assert main(["multipliers", "--slope-deg", "3", "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert_plain_text(text)
+    assert "post-impact state: q1 0.21866880 rad, dq1 -1.09238359 rad/s" in text
+    assert "-0.19972613 + 0.54447606i" in text and "0.57995233" in text
 
 
 @pytest.mark.parametrize(
@@ -137,7 +161,9 @@ def test_sweep_csv_png(tmp_path, capsys):
     r3 = [r for r in rows if r["family"] == "unstable" and float(r["slope_deg"]) == 3.0][0]
     np.testing.assert_allclose(float(r3["a"]), 0.204676, atol=6e-7)  # thesis (7.9)
     assert png_path.stat().st_size > 10_000
-    assert "found at 3 of 3" in capsys.readouterr().out
+    text = capsys.readouterr().out
+    assert "stable family: gait found at 3 of 3 slopes (2.5 to 3.5 deg)" in text
+    assert_plain_text(text)
     # the same sweep as JSON carries the same stability columns (same programs)
     args = ["sweep", "--slope-deg", "2.5:3.5:0.5", "--family", "both", "--transverse"]
     assert main([*args, "--json"]) == 0

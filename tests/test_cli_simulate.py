@@ -11,6 +11,7 @@ import _paths  # noqa: F401  (puts benchmarks/ on sys.path)
 import numpy as np
 import pytest
 import scipy_reference as ref
+from _text import assert_plain_text
 
 from vhcjax import cli
 
@@ -45,6 +46,8 @@ def test_table_output_and_default_start(capsys):
     assert code == 0, err
     assert "result: successful (3/3 steps)" in out
     assert "0.7343" in out
+    assert "q1 0.218669 rad" in out and "angles in rad" in out  # the start, with units
+    assert_plain_text(out)
 
 
 def test_a_fall_is_reported_not_an_error(capsys):

@@ -5,6 +5,7 @@ import json
 
 import numpy as np
 import pytest
+from _text import assert_plain_text
 
 from vhcjax import cli
 
@@ -111,6 +112,12 @@ def test_without_basin_the_fractions_are_null_with_a_reason(capsys):
     assert out["stable"] is True and sim["recovered"] is False
     assert "not recovered (ended fell after 0 steps)" in sim["recovered_reason"]
     assert "warning: stable is the local verdict" in captured.err
+    # the same in words (the programs are compiled)
+    assert cli.main(argv[:-1] + ["--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert_plain_text(text)
+    assert "verdict with feedback: stable" in text and "True" not in text
+    assert "without feedback: fell after 0 of 30 steps" in text
 
 
 def test_a_saturated_torque_says_the_perturbation_was_not_recovered(capsys):

@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _text import assert_plain_text
 
 import vhcjax
 from vhcjax._results import RESULTS
@@ -257,6 +258,13 @@ def test_cli_gait_and_multipliers(capsys, kw, gait):
     pm = np.asarray(m["multipliers_poincare"])
     np.testing.assert_allclose(np.sort(np.abs(pm[:, 0] + 1j * pm[:, 1])), ev, atol=1e-10)
     np.testing.assert_allclose(m["max_abs_multiplier"], ev[-1], atol=1e-10)
+    # both again as text (the same programs): words and units, no reprs
+    for cmd in ("gait", "multipliers"):
+        assert main([cmd, "--model", "kneed", "--slope-deg", SLOPE_DEG, "--quiet"]) == 0
+        text = capsys.readouterr().out
+        assert_plain_text(text)
+        assert "kneed-walker gait at slope 2.88771 deg" in text
+        assert "q1 0.18818546 rad" in text and "verdict: stable" in text
 
     # a model where the family is lost: the record has the compass gait's nulls, and says
     # why

@@ -6,6 +6,7 @@ import math
 import numpy as np
 import pytest
 from _robust import stable_gait
+from _text import assert_plain_text
 
 import vhcjax as vj
 from vhcjax.robustness._contraction import steps_to_shrink
@@ -29,6 +30,21 @@ def test_measured_decay_matches_multipliers():
     assert math.isclose(float(c.steps_10x), math.log(0.1) / math.log(rho))
     # The errors really shrink 10x and 100x (measured, transients included).
     assert 0 < float(c.measured_steps_10x) < float(c.measured_steps_100x) <= 30
+
+
+def test_cli_labels_predicted_and_measured(capsys):
+    """`vhcjax contraction` (the sizes above: the same programs) labels the predicted
+    figures (asymptotic, from the multipliers) and the measured ones (medians over the
+    recoveries, first steps included) so that a difference does not read as a
+    contradiction."""
+    from vhcjax.cli import main
+
+    assert main(["contraction", "--perturbations", "8", "--steps", "30", "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert_plain_text(text)
+    assert "spectral radius of the step-to-step map: 0.5799" in text
+    assert "4.23 predicted (asymptotic rate)" in text
+    assert "measured (median over the recoveries, counted from the perturbation" in text
 
 
 def test_contraction_refuses_a_point_that_is_not_a_gait_and_a_fit_it_cannot_make():

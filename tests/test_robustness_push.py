@@ -9,6 +9,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from _robust import long_walk, returns_to, stable_gait
+from _text import assert_plain_text
 
 import vhcjax as vj
 from vhcjax.robustness._push import direction, impulse_step, pulse_step
@@ -103,6 +104,12 @@ def test_cli_says_when_the_step_budget_decides_the_largest_push(capsys):
     assert "at 8 of 8" in out["largest_reason"] and "raise --steps" in out["largest_reason"]
     assert out["gait_stable"] is True and out["gait_spectral_radius"] < 1.0
     assert all(p in (0.0, 0.5) for p in out["most_fragile_phase"])
+    # the same in words: per direction the smallest and largest over the phases, labelled
+    assert main(["push", "--phases", "2", "--steps", "3", "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert_plain_text(text)
+    assert "over 2 phases of the step" in text and "smallest over the phases" in text
+    assert text.count("deg: ") == 4
     # every push up to --max survived: `largest` is the search bound, and it says so
     assert main(["push", "--phases", "2", "--steps", "3", "--max", "0.001", "--json"]) == 0
     captured = capsys.readouterr()
@@ -128,12 +135,17 @@ def test_cli_says_when_the_gait_is_unstable(capsys):
     assert out["gait_stable"] is False
     np.testing.assert_allclose(out["gait_spectral_radius"], 4.2915, atol=1e-3)
     assert "the gait is unstable" in captured.err and "step budget" in out["gait_stable_reason"]
-    argv = ["basin", *unstable, "--grid", "3", "3", "--steps", "5", "--json", "--quiet"]
-    assert main(argv) == 0
+    argv = ["basin", *unstable, "--grid", "3", "3", "--steps", "5", "--quiet"]
+    assert main([*argv, "--json"]) == 0
     captured = capsys.readouterr()
     out = json.loads(captured.out)
     assert out["gait_stable"] is False and "stable manifold" in out["gait_stable_reason"]
     assert "the gait is unstable" in captured.err
+    # the same slice in words: counts by outcome, offsets and area with units
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert_plain_text(text)
+    assert "of 9 starts, within 5 steps: " in text and "rad^2/s" in text and "+q1 " in text
 
 
 def test_cli_gait_by_shooting_where_the_vhc_search_fails_and_an_error_where_both_do(

@@ -13,6 +13,7 @@ import jax.numpy as jnp
 import numpy as np
 import pytest
 from _robust import long_walk, returns_to, stable_gait
+from _text import assert_plain_text
 
 import vhcjax as vj
 from vhcjax.hybrid._simulate import DEFAULT_CONFIG
@@ -155,6 +156,13 @@ def test_cli_says_when_the_step_budget_decides_the_threshold(capsys):
     assert out["max_step_down_m"][1] < 1e-3 and out["max_step_up_m"][1] < 1e-3
     assert "raise --steps" in out["max_step_reason"]
     assert out["gait_stable"] is True and "gait_stable_reason" not in out
+    # in words: each end of the bracket with the digits that tell them apart, and why
+    # the first failing step failed; the recovery per floor step
+    assert main([*argv, "--quiet"]) == 0
+    text = capsys.readouterr().out
+    assert_plain_text(text)
+    assert "not back on the gait within 5 steps" in text and "falls at" not in text
+    assert "-5 mm: " in text and "+5 mm: " in text
 
 
 def test_cli_says_when_the_gait_is_unstable(capsys):

@@ -8,6 +8,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _text import assert_plain_text
 
 import vhcjax
 from vhcjax import CompassGait, stability as S
@@ -203,6 +204,13 @@ def test_cli_bifurcation_json_and_files(tmp_path, capsys):
     )
     assert abs(float(r3[3]) - float(fp.periods[0])) < 1e-6
     assert png.stat().st_size > 10_000
+    # the same summary in words (the programs are compiled: a second run is cheap)
+    argv = ["bifurcation", "--slope-deg", "2.75:3.0:0.05", "--transient", "40", "--record", "8"]
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert_plain_text(text)
+    assert "period doubling (a multiplier crossing -1): none in the slopes given" in text
+    assert "simulated 6 of 6 slopes (2.75 to 3 deg)" in text and "fell at 0 slopes" in text
 
 
 @pytest.mark.slow

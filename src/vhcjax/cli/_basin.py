@@ -20,6 +20,7 @@ from ._common import (
     print_json,
     shown,
 )
+from ._words import SECTION
 
 #: Largest basin grid (points): each point is a simulation and some 100 bytes of results
 #: in memory, more in JSON; beyond this, refuse up front rather than run out of memory.
@@ -190,17 +191,50 @@ def run_basin(args):
     if args.json:
         print_json(out)
     else:
+        _print_basin(args, out)
+
+
+#: Units of the section coordinates.
+UNITS = dict(SECTION)
+#: The labels of the basin's points, in words (`counts` keys).
+LABEL_WORDS = {
+    "converged": "returned to the gait",
+    "fell": "fell",
+    "other_cycle": "settled on another gait",
+    "undecided": "did none of these",
+}
+
+
+def _print_basin(args, out):
+    """The text output of `vhcjax basin`: the summary `out` (its JSON) in words."""
+    x, y = out["axes"]
+    ux, uy = UNITS[x], UNITS[y]
+    area_unit = f"{ux} {uy}".replace("rad rad", "rad^2")
+    hx, hy = args.half_widths
+    total = sum(out["counts"].values())
+    print(
+        f"basin slice in ({x}, {y}) about the gait: {args.grid[0]} x {args.grid[1]} starts "
+        f"within +-{hx:.4g} {ux} ({x}) and +-{hy:.4g} {uy} ({y}) of the gait's post-impact "
+        f"state, {args.steps} steps each"
+    )
+    print(
+        f"  of {total} starts, within {args.steps} steps: "
+        + ", ".join(f"{n} {LABEL_WORDS[k]}" for k, n in out["counts"].items())
+    )
+    print(
+        f"  converging fraction {out['fraction']:.4f}; converging area "
+        f"{out['area']:.4g} {area_unit}"
+    )
+    reach = out["max_converging"]
+    print(
+        "  largest offset from the gait up to which every start on the grid line through "
+        "it returns: " + ", ".join(f"{k} {v:.4g} {UNITS[k[1:]]}" for k, v in reach.items())
+    )
+    if "volume" in out:
+        v = out["volume"]
+        box = ", ".join(f"+-{w:.4g} {u} ({n})" for (n, u), w in zip(SECTION, v["box_half_widths"]))
+        lo, hi = v["interval_95"]
         print(
-            f"slice {args.axes}: converging fraction {b.fraction:.4f}, area {b.area:.5g}; "
-            f"counts {counts}"
+            f"3-D box of {box} about the gait: converging fraction {v['fraction']:.4f} of "
+            f"{v['samples']} random starts (95% confidence interval {lo:.4f} to {hi:.4f})"
         )
-        print(
-            "largest converging offset along the grid lines through the gait: "
-            + ", ".join(f"{k} {v:.4g}" for k, v in out["max_converging"].items())
-        )
-        if "volume" in out:
-            vv = out["volume"]
-            print(
-                f"3-D box +-{args.box}: fraction {vv['fraction']:.4f}, 95% CI "
-                f"[{vv['interval_95'][0]:.4f}, {vv['interval_95'][1]:.4f}]"
-            )

@@ -24,6 +24,7 @@ from ._common import (
     walker_from_args,
     warn,
 )
+from ._words import complex_words, method_words, section_words, verdict_words
 
 
 def register(subparsers):
@@ -146,16 +147,20 @@ def run_multipliers(args):
     if args.json:
         print_json(out)
     else:
-        what = "kneed-walker gait" if kneed else f"gait of the {args.family} family"
-        print(f"{what} at {args.slope_deg} deg (found by {gait.found_by}): z = {np.asarray(z)}")
-        for i, b in enumerate(pc):
-            left = f"{tr[i]:.8f}" if trusted and tr is not None else "(not used)"
-            print(f"  transverse {left}   poincare {b:.8f}")
-        verdict = "stable" if stab["stable"] else "unstable"
-        print(
-            f"  verdict: {verdict} (largest |multiplier| {stab['max_abs_multiplier']:.8g}, "
-            "Poincare-map Jacobian)"
-        )
+        what = "kneed-walker gait" if kneed else f"{args.family} gait"
+        print(f"{what} at slope {args.slope_deg:g} deg, found by {method_words(gait.found_by)}")
+        print(f"  post-impact state: {section_words(np.asarray(z))}")
+        if trusted and tr is not None:
+            print("  multipliers, two independent computations:")
+            print(f"    {'Poincare-map Jacobian':<28}{'transverse linearization':<28}modulus")
+            for i, b in enumerate(pc):
+                print(f"    {complex_words(b, 8):<28}{complex_words(tr[i], 8):<28}{abs(b):.8f}")
+        else:
+            why_not = "" if compass else f" ({stab['multipliers_reason']})"
+            print(f"  multipliers (Poincare-map Jacobian){why_not}:")
+            for b in pc:
+                print(f"    {complex_words(b, 8):<28}modulus {abs(b):.8f}")
+        print(f"  verdict: {verdict_words(stab['stable'], stab['max_abs_multiplier'])}")
     return 0
 
 
@@ -289,7 +294,7 @@ def run_bifurcation(args):
         "num_aperiodic": int(aperiodic.sum()),
         "transient_steps": args.transient,
         "recorded_steps": args.record,
-        "tolerance": "rtol=atol=1e-8 (FAST_CONFIG)",
+        "tolerance": "rtol=atol=1e-8 (relative and absolute, of the simulations)",
     }
     if not fell.any():
         out["first_fall_slope_deg_reason"] = "no walker fell at any slope simulated"
@@ -301,8 +306,7 @@ def run_bifurcation(args):
     if args.json:
         print_json(out)
     else:
-        for k, v in out.items():
-            print(f"{k}: {v}")
+        _print_bifurcation(out, slopes)
     if missed:
         raise ComputationFailed(
             f"incomplete: no period-1 gait found at {len(missed)} of {len(slopes)} slopes "
@@ -310,6 +314,44 @@ def run_bifurcation(args):
             "period doubling there is not seen (their --csv rows give the search's result)"
         )
     return 0
+
+
+def _print_bifurcation(out, slopes):
+    """The text output of `vhcjax bifurcation`: the summary `out` (its JSON) in words."""
+    flips = out["period_doubling_slopes_deg"]
+    names = ("the period-1 gait", "the period-2 gait")
+    if flips:
+        for name, f in zip(names, flips):
+            print(f"period doubling of {name} (a multiplier crosses -1): {f:.6f} deg")
+    else:
+        print("period doubling (a multiplier crossing -1): none in the slopes given")
+    seen = out["period_doubling_slopes_deg_simulation"]
+    print(
+        "period doublings seen in the simulations (midway between the grid slopes where "
+        "the steps first repeat every 2, 4, ... steps): "
+        + (", ".join(f"{v:.4g} deg" for v in seen) if seen else "none")
+    )
+    print(
+        f"simulated {out['num_slopes'] - out['num_no_gait']} of {out['num_slopes']} slopes "
+        f"({_span(slopes)} deg) from the period-1 gait: {out['transient_steps']} transient "
+        f"steps, then {out['recorded_steps']} recorded (integration tolerance 1e-8, "
+        "relative and absolute)"
+    )
+    first = out["first_fall_slope_deg"]
+    print(
+        f"  the walker fell at {out['num_fell']} slopes"
+        + (f" (first at {first:g} deg)" if first is not None else "")
+    )
+    if out["num_aperiodic"]:
+        print(
+            f"  at {out['num_aperiodic']} slopes the recorded steps repeat with no period "
+            "found (chaotic or not settled)"
+        )
+    if out["num_no_gait"]:
+        print(
+            f"  no period-1 gait found at {out['num_no_gait']} slopes "
+            f"({_span(out['no_gait_slopes_deg'])} deg): not simulated"
+        )
 
 
 def _aperiodic_message(slopes, aperiodic, transient, record):

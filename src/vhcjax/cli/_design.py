@@ -326,25 +326,51 @@ def run_design(args):
     if args.json:
         print_json(out)
     else:
-        o = out["optimum"]
-        print(
-            f"design {args.objective} at {args.slope_deg} deg: {res.result} after "
-            f"{res.iterations} iterations"
-        )
-        print(
-            f"  value {out['initial']['value']:.6g} -> {o['value']:.6g} ({out['units']['value']})"
-        )
-        for k in vary:
-            print(f"  {k:>9} {out['initial']['params'][k]:.6g} -> {o['params'][k]:.6g}")
+        _print_design(args, out, vary)
     return 0 if res.result in ("successful", "max_iterations", "no_descent") else 1
+
+
+#: Units of the parameters (`--vary` names).
+UNITS = {"mass-hip": "kg", "mass-leg": "kg", "a": "m", "b": "m", "gravity": "m/s^2"}
+#: Each objective in words: (what is done, the quantity, its unit).
+_OBJECTIVE_WORDS = {
+    "spectral-radius": ("minimise", "spectral radius", ""),
+    "flip-slope": ("maximise", "period-doubling (flip) slope", " deg"),
+    "speed": ("maximise", "speed", " m/s"),
+}
+
+
+def _print_design(args, out, vary):
+    """The text output of `vhcjax design`: the summary `out` (its JSON) in words."""
+    how, name, unit = _OBJECTIVE_WORDS[args.objective]
+    print(
+        f"design: {how} the {name} of the stable gait at slope {args.slope_deg:g} deg by "
+        f"varying {', '.join(vary)}"
+    )
+    print(
+        f"  ended after {out['iterations']} iterations: {out['result_reason']}"
+        if out["result"] == "successful"
+        else f"  stopped after {out['iterations']} iterations: {out['result_reason']}"
+    )
+    start, o = out["initial"], out["optimum"]
+
+    def value(v):
+        return "not defined" if v is None else f"{v:.6g}{unit}"
+
+    print(f"  {name}: {value(start['value'])} -> {value(o['value'])}")
+    for k in vary:
+        print(f"  {k}: {start['params'][k]:.6g} -> {o['params'][k]:.6g} {UNITS[k]}")
+    verdict = "stable" if o["stable"] else "unstable"
+    print(f"  the final gait is {verdict} (largest multiplier modulus {o['spectral_radius']:.6g})")
 
 
 #: What each `DesignResult.result` means (the JSON's `result_reason`).
 _REASONS = {
     "successful": (
-        "a stationary point: the projected gradient vanished (relative gtol), or, where "
-        "the objective has a kink, the shortest vector in the convex hull of gradients "
-        "sampled within sampling_radius of the optimum did (stationarity)"
+        "a stationary point: the projected gradient vanished (to its relative tolerance), "
+        "or, where the objective has a kink, the shortest vector in the convex hull of "
+        "the gradients sampled near the optimum did (`stationarity` within "
+        "`sampling_radius`)"
     ),
     "max_iterations": "the iteration limit (--steps) was reached before a stationary point",
     "no_descent": (
@@ -430,12 +456,34 @@ def run_atlas(args):
     if args.json:
         print_json(rec)
     else:
-        found = sum(c["flip_slope_deg"] is not None for c in rec["cells"])
-        print(f"atlas: {len(mu)} x {len(beta)} cells, flip slope found in {found}")
-        for c in rec["cells"]:
-            f = c["flip_slope_deg"]
-            print(
-                f"  mu {c['mass_ratio']:.4g} beta {c['length_ratio']:.4g}: "
-                + (f"flip {f:.5f} deg" if f is not None else c.get("reason", ""))
-            )
+        _print_atlas(args, rec, mu, beta)
     return 0
+
+
+def _print_atlas(args, rec, mu, beta):
+    """The text output of `vhcjax atlas`: one line per cell."""
+    found = sum(c["flip_slope_deg"] is not None for c in rec["cells"])
+    print(
+        f"atlas over the mass ratio mu = mH/m ({_span(mu)}) and the length ratio beta = b/a "
+        f"({_span(beta)}): the first period-doubling (flip) slope of the stable gait, found "
+        f"in {found} of {len(mu) * len(beta)} cells"
+    )
+    for c in rec["cells"]:
+        f = c["flip_slope_deg"]
+        line = f"  mu {c['mass_ratio']:.4g}, beta {c['length_ratio']:.4g}: "
+        if f is None:
+            line += c.get("reason", "no flip slope found")
+        else:
+            line += f"flip at {f:.5f} deg"
+            rng = c.get("stable_range_deg")
+            if rng:
+                line += f", stable from {rng[0]:.4g} to {rng[1]:.4g} deg"
+        rho = c.get("spectral_radius")
+        if args.slope_deg is not None and rho is not None:
+            line += f"; spectral radius {rho:.4g} at {args.slope_deg:g} deg"
+        print(line)
+
+
+def _span(values):
+    """`"a"` or `"a to b"`: the first and last of some values, for a message."""
+    return f"{values[0]:g}" if len(values) == 1 else f"{values[0]:g} to {values[-1]:g}"

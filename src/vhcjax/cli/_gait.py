@@ -27,6 +27,7 @@ from ._common import (
     warn,
 )
 from ._multiplier_fields import CSV_COLUMNS as STABILITY_COLUMNS
+from ._words import complex_words, method_words, section_words, verdict_words
 
 #: CSV columns of `vhcjax sweep` (`sweep_rows` and `add_stability_columns` write them;
 #: new ones go at the end).
@@ -213,25 +214,55 @@ def run_gait(args):
     if args.json:
         print_json(rec)
         return 0
-    print(
-        f"gait search at {args.slope_deg} deg (family {args.family}, found by {rec['method']}): "
-        f"{rec['result']}"
-    )
-    assert rec["params"] is not None
-    for k, v in rec["params"].items():
-        print(f"  {k:>3} = {v: .9f}")
-    print(
-        f"  step length {float(gait.step_length):.6f} m, speed {float(gait.speed):.6f} m/s, "
-        f"{rec['iterations']} iterations, residual {rec['residual']:.2e}"
-    )
-    if stab is not None:
-        mods = ", ".join(f"{abs(complex(*e)):.6g}" for e in stab["multipliers_poincare"])
-        verdict = "stable" if stab["stable"] else "unstable"
-        print(
-            f"  verdict: {verdict} (largest |multiplier| {stab['max_abs_multiplier']:.6g}; "
-            f"Poincare-map moduli {mods})"
-        )
+    _print_gait(args, gait, rec, stab)
     return 0
+
+
+#: The gait parameters of thesis (5.2) in words, with their units.
+PARAM_WORDS = {
+    "a": ("rad", "q1 just after impact"),
+    "b": ("rad/s", "dq1 just after impact"),
+    "c": ("rad", "q1 just before impact"),
+    "d": ("rad/s", "dq1 just before impact"),
+    "e": ("rad", "q2 just after impact"),
+    "f": ("rad/s", "dq2 just after impact"),
+    "g": ("rad", "q2 just before impact"),
+    "h": ("rad/s", "dq2 just before impact"),
+    "T": ("s", "step period"),
+    "E0": ("J", "energy after impact"),
+}
+
+
+def _print_gait(args, gait, rec, stab):
+    """The text output of `vhcjax gait` (compass gait, simplest walker)."""
+    print(
+        f"{args.family} gait at slope {args.slope_deg:g} deg, found by "
+        f"{method_words(rec['method'])}: {rec['iterations']} Newton iterations, "
+        f"residual {rec['residual']:.1e}"
+    )
+    print("  gait parameters (thesis 5.2):")
+    for k, v in rec["params"].items():
+        unit, words = PARAM_WORDS[k]
+        print(f"  {k:>4} = {v: .9f} {unit:<5}  {words}")
+    print(f"  step length {float(gait.step_length):.6f} m, speed {float(gait.speed):.6f} m/s")
+    if stab is None:
+        return
+    print(
+        "  multipliers (Poincare-map Jacobian): "
+        + ", ".join(complex_words(complex(*e)) for e in stab["multipliers_poincare"])
+    )
+    if args.transverse:
+        if stab["multipliers"] is None:
+            print(f"  transverse linearization: not used ({stab['multipliers_reason']})")
+        else:
+            print(
+                "  multipliers (transverse linearization): "
+                + ", ".join(complex_words(complex(*e)) for e in stab["multipliers"])
+            )
+            dis = stab["transverse_disagreement"]
+            if dis is not None:
+                print(f"  the two computations agree to {dis:.1e} (relative)")
+    print(f"  verdict: {verdict_words(stab['stable'], stab['max_abs_multiplier'])}")
 
 
 def _none_found(rows, method):
@@ -292,20 +323,21 @@ def _run_kneed_gait(args):
     if args.json:
         print_json(rec)
     else:
-        print(f"kneed walker gait at {args.slope_deg} deg (shooting): {result}")
-        if why:
-            print(f"  {why}")
-        if found:
-            assert rec["z"] is not None  # None only when not found
-            print("  z = (q1, dq1, dq2) = " + ", ".join(f"{v:.8f}" for v in rec["z"]))
-            line = f"  period {rec['period']:.8f} s"
-            if "multipliers_poincare" in rec:
-                line += (
-                    ", multipliers "
-                    + ", ".join(f"{complex(*v):.5f}" for v in rec["multipliers_poincare"])
-                    + f" ({'stable' if rec['stable'] else 'unstable'})"
-                )
-            print(line)
+        # without --json a failed search has raised its one line already
+        assert gait is not None and rec["z"] is not None
+        print(
+            f"kneed-walker gait at slope {args.slope_deg:g} deg, found by "
+            f"{method_words('shooting')}: {rec['iterations']} Newton iterations, "
+            f"residual {rec['residual']:.1e}"
+        )
+        print(f"  post-impact state: {section_words(rec['z'])}")
+        print(f"  step period {rec['period']:.8f} s")
+        if "multipliers_poincare" in rec:
+            print(
+                "  multipliers (Poincare-map Jacobian): "
+                + ", ".join(complex_words(complex(*v)) for v in rec["multipliers_poincare"])
+            )
+            print(f"  verdict: {verdict_words(rec['stable'], rec['max_abs_multiplier'])}")
     return 0 if found else 1
 
 
@@ -329,6 +361,17 @@ def sweep_rows(gaits, slopes_deg):
         row["method"] = ("shooting" if by[i] else "vhc") if ok else None
         rows.append(row)
     return rows
+
+
+def _end_words(end):
+    """Why a family ends (an entry of `Sweep.ends()`), in words: a bare result code is
+    replaced by its description."""
+    from .._results import RESULTS
+
+    code = end["result"]
+    if end["reason"] == code and hasattr(RESULTS, code):
+        return RESULTS[getattr(RESULTS, code)].rstrip(".")
+    return end["reason"]
 
 
 def _nulls(row):
@@ -427,19 +470,21 @@ def run_sweep(args):
             }
         )
     else:
+        span = f"{slopes[0]:g} to {slopes[-1]:g} deg" if len(slopes) > 1 else f"{slopes[0]:g} deg"
         for fam in families:
             s = summary[fam]
-            by = f" ({s['found_by_shooting']} by shooting)" if s["found_by_shooting"] else ""
-            print(f"{fam}: found at {s['found']} of {s['total']} slopes{by}")
+            by = f", {s['found_by_shooting']} of them by shooting" if s["found_by_shooting"] else ""
+            print(f"{fam} family: gait found at {s['found']} of {s['total']} slopes ({span}{by})")
             if "reason" in s:
                 print(f"  {s['reason']}")
             for e in s["ends"]:
+                reason = _end_words(e)
                 if e["isolated"]:
-                    print(f"  not found at {e['slope_deg']:.4g} deg: {e['reason']}")
+                    print(f"  not found at {e['slope_deg']:.4g} deg: {reason}")
                     continue
                 print(
-                    f"  ends near {e['last_slope_deg']:.4g} deg (next: {e['slope_deg']:.4g} "
-                    f"deg): {e['reason']}"
+                    f"  ends after {e['last_slope_deg']:.4g} deg (not found at the next slope, "
+                    f"{e['slope_deg']:.4g} deg): {reason}"
                 )
     # exit 1 (the computation failed) only where no gait was found at all
     return 0 if any(s["found"] for s in summary.values()) else 1

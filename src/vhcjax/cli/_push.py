@@ -176,25 +176,45 @@ def run_push(args):
     if args.json:
         print_json(out)
     else:
-        for j, a in enumerate(args.directions_deg):
-            col = res.largest[:, j]
-            col = col[np.isfinite(col)]
-            if col.size == 0:
-                print(f"direction {a:g} deg: no push survived at any phase, not even 0 {unit}")
-                continue
-            fragile = res.most_fragile_phase[j]
+        _print_push(args, res, phases, unit, top.reshape(res.largest.shape), out)
+
+
+def _print_push(args, res, phases, unit, top, out):
+    """The text output of `vhcjax push`: per direction the smallest and the largest over
+    the phases of the largest push survived, each with its phase (labelled as such, not
+    a range of uncertainty)."""
+    import numpy as np
+
+    what = "impulse" if args.duration == 0 else f"force held {args.duration:g} s"
+    print(
+        f"largest hip push ({what}) survived, per direction (degrees from forward, "
+        f"counter-clockwise), over {len(phases)} phases of the step (phase 0 = just after "
+        "heel strike, 1 = the next one):"
+    )
+    for j, a in enumerate(args.directions_deg):
+        col = np.asarray(res.largest[:, j], float)
+        known = np.isfinite(col)
+        if not known.any():
+            print(f"  {a:g} deg: no push survived at any phase, not even 0 {unit}")
+            continue
+        lo = int(np.argmin(np.where(known, col, np.inf)))
+        hi = int(np.argmax(np.where(known, col, -np.inf)))
+
+        bound = " or more (the search bound --max)"
+        value = [f"{v:.4g} {unit}" + (bound if t else "") for v, t in zip(col, top[:, j])]
+        if np.all(top[:, j] | ~known):
             print(
-                f"direction {a:g} deg: largest push survived {col.min():.4g}-"
-                f"{col.max():.4g} {unit}; "
-                + (
-                    f"most fragile at phase {fragile:.2f}"
-                    if np.isfinite(fragile)
-                    else f"no phase known as the most fragile (--max {args.max:g} {unit} "
-                    "bounds the search)"
-                )
+                f"  {a:g} deg: the search bound {args.max:g} {unit} survived at every phase "
+                "(raise --max to find the limits)"
             )
-        if args.check:
-            print(
-                "autodiff vs transverse linearization: max difference "
-                f"{out['max_abs_difference_autodiff_vs_transverse']:.2e}"
-            )
+            continue
+        fragile = " (the most fragile phase)" if np.isfinite(res.most_fragile_phase[j]) else ""
+        print(
+            f"  {a:g} deg: smallest over the phases {value[lo]} at phase {phases[lo]:.2f}"
+            f"{fragile}; largest {value[hi]} at phase {phases[hi]:.2f}"
+        )
+    if args.check:
+        print(
+            "sensitivity by autodiff and by the transverse linearization: largest "
+            f"difference {out['max_abs_difference_autodiff_vs_transverse']:.2e}"
+        )

@@ -172,11 +172,17 @@ def run(args):
     if args.json:
         print_json({"result": result, "num_successful": int(sim.num_successful), "steps": steps})
     else:
-        print(f"slope {math.degrees(float(model.psi)):g} deg, x0 = {list(args.x0)}")
         n = model.n_dof
-        heads = [f"q{j + 1}+" for j in range(n)] + [f"dq{j + 1}+" for j in range(n)]
+        names = [f"q{j + 1}" for j in range(n)] + [f"dq{j + 1}" for j in range(n)]
+        units = ["rad"] * n + ["rad/s"] * n
+        start = ", ".join(f"{h} {v:.10g} {u}" for h, v, u in zip(names, args.x0, units))
+        print(f"slope {math.degrees(float(model.psi)):g} deg, start: {start}")
         print(
-            f"{'step':>4} {'period (s)':>11}  " + " ".join(f"{h:>10}" for h in heads) + "  result"
+            "state just after each impact (angles in rad, angular velocities in rad/s; "
+            "for a step that failed, the last state reached):"
+        )
+        print(
+            f"{'step':>4} {'period (s)':>11}  " + " ".join(f"{h:>10}" for h in names) + "  result"
         )
         for i, s in enumerate(steps, 1):
             x = s["x_plus"] if s["x_plus"] is not None else s["x_minus"]

@@ -19,6 +19,7 @@ from ._common import (
     second_figure,
     warn,
 )
+from ._words import bracket_words, list_words
 
 
 def register(subparsers):
@@ -121,16 +122,66 @@ def run_slope(args):
     if args.json:
         print_json(out)
     else:
-        if "per_rad" in out:
-            d = out["per_rad"]
-            print(
-                f"per degree of slope: dT {float(d['dperiod']) * math.pi / 180:+.5f} s, "
-                f"dv {float(d['dspeed']) * math.pi / 180:+.5f} m/s, d|lambda| "
-                f"{np.round(np.asarray(d['dmodulus']) * math.pi / 180, 5)}"
-            )
-        print(f"gait sensitivity norm (floor height -> step time): {float(g.norm):.4f} s/m")
+        _print_slope(args, out, th, rec)
+
+
+#: What a recovery label (`vhcjax.CONVERGED`, `FELL`, `OTHER_CYCLE`, `UNDECIDED`) says
+#: happened, in words.
+OUTCOME = {
+    0: "back on the gait",
+    1: "fell",
+    2: "settled on another gait",
+    3: "neither back on the gait nor fallen",
+}
+
+
+def _print_slope(args, out, th, rec):
+    """The text output of `vhcjax slope-sensitivity`."""
+    import numpy as np
+
+    from ..robustness import CONVERGED, FELL, UNDECIDED
+
+    per_deg = math.pi / 180
+    if "per_rad" in out:
+        d = out["per_rad"]
+        moduli = list_words(np.asarray(d["dmodulus"]) * per_deg, "{:+.5f}")
         print(
-            f"largest step down survived: {1000 * th.lo[0]:.2f} mm (falls at "
-            f"{1000 * th.hi[0]:.2f}); step up: {1000 * th.lo[1]:.2f} mm (falls at "
-            f"{1000 * th.hi[1]:.2f})"
+            f"change per degree of slope: step period {float(d['dperiod']) * per_deg:+.5f} s, "
+            f"speed {float(d['dspeed']) * per_deg:+.5f} m/s, multiplier moduli {moduli}"
         )
+    print(
+        "gait sensitivity norm (change of the step times per metre of floor height): "
+        f"{float(out['gait_sensitivity_norm']):.4f} s/m"
+    )
+    print(
+        "largest single floor step survived (first failing step by bisection; survived: "
+        f"back on the gait within {args.steps} steps):"
+    )
+    for j, name in enumerate(("down", "up")):
+        if th.fails_min[j]:
+            print(f"  step {name}: none survived, not even {1000 * th.lo[j]:.3g} mm")
+            continue
+        if not np.isfinite(th.hi[j]):
+            print(
+                f"  step {name}: {1000 * th.lo[j]:.2f} mm survived, the largest tried: the "
+                "limit lies beyond"
+            )
+            continue
+        lo, hi = bracket_words(th.lo[j], th.hi[j], "mm", 1000.0)
+        label = int(th.hi_label[j])
+        why = {FELL: "fell", UNDECIDED: f"not back on the gait within {args.steps} steps"}.get(
+            label, OUTCOME.get(label, "failed")
+        )
+        print(f"  step {name}: {lo} survived; {hi} {why}")
+    heights = np.asarray(out["recovery"]["heights_m"]) * 1000
+    parts = []
+    for h, label, k in zip(heights, np.asarray(rec.label), np.asarray(rec.steps)):
+        label, k = int(label), int(k)
+        if label == CONVERGED:
+            what = f"back on the gait after {k} steps"
+        elif label == FELL:
+            what = f"fell at step {k}"
+        else:
+            what = OUTCOME[label]
+        parts.append(f"{h:+g} mm: {what}")
+    print(f"recovery after a floor step (+ up, within {args.steps} steps): " + "; ".join(parts))

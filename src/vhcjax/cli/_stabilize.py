@@ -21,6 +21,7 @@ from ._common import (
     walker_from_args,
     warn,
 )
+from ._words import complex_words, section_words
 
 FAMILIES = ("unstable", "stable")
 
@@ -383,33 +384,61 @@ def run_stabilize(args):
     if args.json:
         print_json(_finite_or_none(out))
     else:
-        fmt = lambda ev: ", ".join(f"{complex(v):.6g}" for v in np.asarray(ev))
-        what = "kneed-walker" if kneed else args.family
-        print(f"{what} gait at {args.slope_deg:g} deg: z = {np.round(zn, 8).tolist()}")
-        print(f"open-loop multipliers:   {fmt(st.open_loop_multipliers)}")
-        print(f"closed-loop multipliers: {fmt(st.closed_loop_multipliers)} (Poincare map)")
-        print(f"                         {fmt(st.closed_loop_multipliers_transverse)} (transverse)")
-        agreement = (
-            f"Riccati two ways agree to {float(st.riccati_agreement):.2e}"
-            if check == "successful"
-            else f"Riccati check by the Hamiltonian monodromy: {check}"
-        )
-        print(f"{agreement}; max gain {float(st.max_gain):.4g}; stable: {stable}")
-        s = out["simulation"]
-
-        def end(key):
-            if s[key] is None:
-                return s[key + "_reason"].split(";")[0]
-            return f"error after {args.steps} steps {s[key]:.3e}"
-
-        print(
-            f"from +{args.perturbation:g}: {end('final_error')} with feedback (max torque "
-            f"{s['max_abs_torque']:.4g} N m); {end('passive_final_error')} passive"
-        )
-        if args.basin:
-            b = out["basin"]
-            print(
-                f"basin slice (q1, dq1): passive {b['passive_fraction']:.3f}, "
-                f"with feedback {b['closed_loop_fraction']:.3f}"
-            )
+        _print_stabilize(args, out, zn, check)
     return 0 if ok else 1
+
+
+def _print_stabilize(args, out, zn, check):
+    """The text output of `vhcjax stabilize`: the summary `out` (its JSON) in words."""
+    import numpy as np
+
+    kneed = args.model == "kneed"
+    what = "kneed-walker" if kneed else args.family
+    torques = " and ".join(_TORQUES[args.model])
+
+    def moduli(key):
+        ev = np.asarray(out[key])
+        words = ", ".join(complex_words(v) for v in ev)
+        return f"{words} (largest modulus {np.max(np.abs(ev)):.4g})"
+
+    print(f"{what} gait at slope {args.slope_deg:g} deg, post-impact state {section_words(zn)}")
+    print(f"multipliers without feedback: {moduli('open_loop_multipliers')}")
+    print(
+        f"multipliers with {torques} torque feedback (Poincare-map Jacobian): "
+        f"{moduli('closed_loop_multipliers')}"
+    )
+    print(
+        f"  the same by the transverse linearization: "
+        f"{moduli('closed_loop_multipliers_transverse')}"
+    )
+    agreement = (
+        f"its two computations agree to {out['riccati_agreement']:.1e}"
+        if check == "successful"
+        else f"the check by the Hamiltonian monodromy ended {check}"
+    )
+    print(
+        f"periodic Riccati solution: {agreement}; largest feedback gain "
+        f"{out['max_gain']:.4g} (N m/rad or N m s/rad)"
+    )
+    print(f"verdict with feedback: {'stable' if out['stable'] else 'unstable'}")
+    s = out["simulation"]
+
+    def end(key):
+        if s[key] is None:
+            return s[key + "_reason"].split(";")[0]
+        return f"error {s[key]:.2e} after {args.steps} steps"
+
+    print(
+        f"from the gait's post-impact state + {args.perturbation:g} (rad, rad/s) on each of "
+        f"q1, dq1, dq2 (error: largest deviation from the gait after impact, rad or rad/s):"
+    )
+    print(f"  with feedback: {end('final_error')} (largest torque {s['max_abs_torque']:.4g} N m)")
+    print(f"  without feedback: {end('passive_final_error')}")
+    if args.basin:
+        b = out["basin"]
+        print(
+            f"basin slice in (q1, dq1), {args.basin_grid} x {args.basin_grid} starts within "
+            "+-0.05 rad and +-0.3 rad/s of the gait: converging fraction "
+            f"{b['passive_fraction']:.3f} without feedback, {b['closed_loop_fraction']:.3f} "
+            "with feedback"
+        )
