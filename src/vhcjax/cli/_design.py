@@ -369,8 +369,7 @@ _REASONS = {
     "successful": (
         "a stationary point: the projected gradient vanished (to its relative tolerance), "
         "or, where the objective has a kink, the shortest vector in the convex hull of "
-        "the gradients sampled near the optimum did (`stationarity` within "
-        "`sampling_radius`)"
+        "the gradients sampled near the optimum did"
     ),
     "max_iterations": "the iteration limit (--steps) was reached before a stationary point",
     "no_descent": (

@@ -414,7 +414,7 @@ def _print_stabilize(args, out, zn, check):
     agreement = (
         f"its two computations agree to {out['riccati_agreement']:.1e}"
         if check == "successful"
-        else f"the check by the Hamiltonian monodromy ended {check}"
+        else out["riccati_agreement_reason"]
     )
     print(
         f"periodic Riccati solution: {agreement}; largest feedback gain "
