@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+from _text import assert_plain_text
 
 from vhcjax.cli import main
 from vhcjax.reproduce import N_SECTIONS, _report as R, _run, reproduce
@@ -109,6 +110,32 @@ def test_report_sections_and_figures(quick_run):
     ):
         assert needed in figs
     assert "total run time" in report and "jax" in report and "device" in report
+
+
+def test_report_reads_in_plain_words(quick_run):
+    """The report opens with its findings, built from the computed numbers; it holds no
+    internal names or reprs, explains every code it prints, and says each cross-check
+    once (below its table), not on every row."""
+    _, res, report = quick_run
+    assert_plain_text(report)
+    findings = report.split("## Findings", 1)[1].split("##", 1)[0]
+    pd = res["sections"]["doubling"]["results"]["poincare"]
+    assert f"period-doubles at {pd:.5f} deg" in findings
+    assert "The stable gait at 3 deg (7.4) is confirmed" in findings
+    assert "Period pattern" not in report and "differs (differs" not in report
+    assert "recorded step periods repeat, by slope: every step from" in report
+    for sec in res["sections"].values():
+        text = report.split(f"## {sec['title']}\n", 1)[1].split("\n## ", 1)[0]
+        rows = [line for line in text.splitlines() if line.startswith("|")]
+        below = [line for line in text.splitlines() if not line.startswith("|")]
+        for check in {str(r["cross_check"]) for r in sec["rows"]}:
+            said = [
+                line
+                for line in below
+                if line.split(". ", 1)[-1] == check or line.split(": ", 1)[-1] == check
+            ]
+            assert len(said) == 1, (sec["title"], check)
+            assert not any(check in row for row in rows), (sec["title"], check)
 
 
 def test_verdicts_are_computed(quick_run):

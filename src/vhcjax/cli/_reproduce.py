@@ -33,9 +33,9 @@ def run_reproduce(args):
     bar = progress(total=N_SECTIONS, desc="reproduce", disable=True if args.quiet else None)
     res = reproduce(args.out, quick=args.quick, progress=bar)
     bar.close()
-    counts = ", ".join(f"{k}: {v}" for k, v in sorted(res["verdict_counts"].items()))
+    counts = ", ".join(f"{v} {k}" for k, v in sorted(res["verdict_counts"].items()))
     print(
-        f"wrote {os.path.join(args.out, 'report.md')} and results.json "
-        f"({res['total_seconds']:.0f} s; verdicts {counts})"
+        f"wrote {os.path.join(args.out, 'report.md')} and results.json in "
+        f"{res['total_seconds']:.0f} s; the thesis's numbers against ours: {counts}"
     )
     return 0

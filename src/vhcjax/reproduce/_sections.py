@@ -16,7 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._results import result_codes, result_names
+from .._results import RESULTS, result_codes, result_names
 from ..gait import find_gaits, sweep
 from ..hybrid import simulate
 from ..models import CompassGait
@@ -189,6 +189,24 @@ def _ev_check(mult, i):
     )
 
 
+#: The gaits of chapter 7 (`Run.gaits` keys) in words.
+GAIT_WORDS = {
+    "stable3": "stable gait at 3 deg",
+    "unstable3": "unstable gait at 3 deg",
+    "stable5": "stable family at 5 deg",
+    "stable287": "stable gait at 2.87 deg",
+    "stable43": "stable gait at 4.3 deg",
+    "uphill": "uphill seed at 3 deg",
+}
+
+
+def _result_words(name):
+    """A search's result code in words: `"found"`, else the code's description."""
+    if name == "successful":
+        return "found"
+    return f"{name.replace('_', ' ')} ({RESULTS[getattr(RESULTS, name)].rstrip('.')})"
+
+
 @dataclasses.dataclass
 class Run:
     """What the sections share: where figures go, the sizes of the mode, and the results
@@ -239,9 +257,9 @@ def gaits(run, sec):
     sec.text(
         "search results",
         "-",
-        ", ".join(f"{k}: {v}" for k, v in names.items()),
+        "; ".join(f"{GAIT_WORDS[k]}: {_result_words(v)}" for k, v in names.items()),
         "computed",
-        "result codes per gait (uphill: infeasible_uphill expected)",
+        "the uphill seed is expected to give no passive gait (thesis 7.17-7.18)",
     )
     sec.notes.append(
         "The gaits of chapter 7 come from one batched call of the VHC search "
@@ -751,15 +769,15 @@ def bifurcation(run, sec):
     if len(two):  # the first simulated slope with a period-2 (or longer) pattern
         i2 = int(two[0])
         before = (
-            f"; previous slope {s_ok[i2 - 1]:.3f} deg has pattern {pat[i2 - 1]}"
+            f"; at the previous slope, {s_ok[i2 - 1]:.3f} deg, {_pattern_word(int(pat[i2 - 1]))}"
             if i2 > 0
             else "; it is the first slope simulated"
         )
         sec.value(
             "first slope with period >= 2 in simulation (grid slope, deg)",
             float(s_ok[i2]),
-            f"pattern {pat[i2]} there{before}; Newton/multiplier "
-            f"period doubling {pd:.5f} deg; grid step "
+            f"step periods repeat there: {_pattern_word(int(pat[i2]))}{before}; "
+            f"period doubling by the multipliers (Newton) at {pd:.5f} deg; grid step "
             f"{slopes[1] - slopes[0]:.3f} deg",
             4,
         )
@@ -769,7 +787,7 @@ def bifurcation(run, sec):
             "-",
             f"none in {s_ok[0]:.2f}-{s_ok[-1]:.2f} deg",
             "(no thesis value)",
-            f"Newton/multiplier period doubling {pd:.5f} deg",
+            f"period doubling by the multipliers (Newton) at {pd:.5f} deg",
         )
     sec.value("slopes simulated / fell", int(ok.sum()), f"{int(np.sum(diag.fell))} fell", 4)
     sec.results = {
@@ -780,9 +798,38 @@ def bifurcation(run, sec):
         "periods": diag.periods,
     }
     sec.notes.append(
-        f"{S['bif_transient']} transient + {S['bif_record']} recorded steps per slope "
-        "from the period-1 gait (+1e-4 rad/s on dq2), FAST_CONFIG. Period pattern per "
-        "slope: " + ", ".join(f"{s:.2f}:{p}" for s, p in zip(slopes[ok], pat))
+        f"Each slope is simulated from its period-1 gait (+1e-4 rad/s on dq2) for "
+        f"{S['bif_transient']} transient and {S['bif_record']} recorded steps, at an "
+        "integration tolerance of 1e-8 (relative and absolute). The recorded step periods "
+        "repeat, by slope: " + _pattern_words(slopes[ok], pat) + "."
+    )
+
+
+def _pattern_word(p):
+    """A period pattern (`detect_period`: k > 0 steps per repetition, 0 no repetition
+    found, -1 fell) in words."""
+    if p > 1:
+        return f"every {p} steps"
+    if p == 1:
+        return "every step"
+    if p == 0:
+        return "no repetition found (chaotic, or not settled)"
+    return "none: the walker fell"
+
+
+def _pattern_words(slopes_deg, pattern):
+    """The period patterns of a bifurcation diagram in words, slope range by slope range:
+    `"every step from 3.50 to 4.37 deg; every 2 steps from 4.40 to 4.90 deg; ..."`."""
+    words = _pattern_word
+    runs = []
+    for s, p in zip(slopes_deg, (int(v) for v in pattern)):
+        if runs and runs[-1][0] == p:
+            runs[-1][2] = s
+        else:
+            runs.append([p, s, s])
+    return "; ".join(
+        f"{words(p)} at {a:.2f} deg" if a == b else f"{words(p)} from {a:.2f} to {b:.2f} deg"
+        for p, a, b in runs
     )
 
 
@@ -810,16 +857,29 @@ def basin(run, sec):
         for i, n in enumerate(("converged", "fell", "other_cycle", "undecided"))
     }
     cy, cx = b.label.shape[0] // 2, b.label.shape[1] // 2
+    centre = "returns" if b.label[cy, cx] == 0 else "does not return"
     sec.value(
         "converging fraction of the slice",
         b.fraction,
-        f"grid {S['basin'][0]}x{S['basin'][1]}; the gait itself (grid centre) "
-        f"converges: {bool(b.label[cy, cx] == 0)}",
+        f"{S['basin'][0]} x {S['basin'][1]} grid; the gait itself (grid centre) {centre}",
         4,
     )
-    sec.value("converging area (rad^2/s)", b.area, f"counts {counts}", 4)
+    words = ("returned", "fell", "settled on another gait", "undecided")
+    sec.value(
+        "converging area (rad^2/s)",
+        b.area,
+        ", ".join(f"{n} {w}" for n, w in zip(counts.values(), words)),
+        4,
+    )
+    axes = {"x": ("q1", "rad"), "y": ("dq1", "rad/s")}
     for k, v in b.max_converging.items():
-        sec.value(f"largest converging offset {k}", v, "along the grid line", 3)
+        name, unit = axes[k[1]]
+        sec.value(
+            f"largest converging offset {k[0]}{name} ({unit})",
+            v,
+            "every grid point up to it on the line through the gait returns",
+            3,
+        )
     sec.results = {
         "fraction": b.fraction,
         "area": b.area,
