@@ -253,7 +253,7 @@ def _call_text(fn, args, in_tree, static, leaves):
         _source(),
         jax.__version__,
         jax.default_backend(),
-        str(jax.config.values["jax_enable_x64"]),
+        str(jax.config.read("jax_enable_x64")),
         f"{fn.__module__}.{fn.__qualname__}",
         str(in_tree),
         text,
@@ -454,7 +454,7 @@ def require_x64():
     """Raise `X64Error` (one line, with the fix) if JAX's float64 mode is off: vhcjax
     turns it on when imported, so it was turned off later in the process. Every stored
     program checks this when called."""
-    if not jax.config.values["jax_enable_x64"]:
+    if not jax.config.read("jax_enable_x64"):  # a direct read (`values` copies them all)
         raise X64Error(
             "vhcjax needs float64, but JAX's float64 mode was turned off after vhcjax was "
             "imported: call jax.config.update('jax_enable_x64', True) before using vhcjax"
