@@ -67,22 +67,16 @@ def analysed_gait(args):
 
 
 def in_walker_units(model, value, kind):
-    """A default given for the thesis's walker (20 kg, 1 m, 9.81 m/s^2), in the same
-    proportion to `model`'s own units (`scales`): a scaled walker gets the scaled
-    default. `kind`: `"angle"` (unchanged), `"rate"` (1/s), `"impulse"` (N s),
-    `"force"` (N)."""
+    """A default given for the thesis's walker (1 m, 9.81 m/s^2), in the same proportion
+    to `model`'s own units (`scales`): a scaled walker gets the scaled default. `kind`:
+    `"angle"` (unchanged) or `"rate"` (1/s). (The push bound's is `push_bound`.)"""
     import math
 
-    s = {k: float(v) for k, v in model.scales().items()}
-    unit = {
-        "angle": 1.0,
-        "rate": 1.0 / s["time"],
-        "impulse": s["mass"] * math.sqrt(s["acceleration"] * s["length"]),
-        "force": s["mass"] * s["acceleration"],
-    }[kind]
-    thesis = {"angle": 1.0, "rate": math.sqrt(9.81), "impulse": 20 * math.sqrt(9.81)}
-    thesis["force"] = 20 * 9.81
-    return float(f"{value * unit / thesis[kind]:.12g}")  # 0.4, not 0.4000000000000001
+    if kind == "angle":
+        return float(value)
+    thesis_time = math.sqrt(1.0 / 9.81)  # the thesis walker's time unit sqrt(l/g), s
+    ratio = thesis_time / float(model.scales()["time"])
+    return float(f"{value * ratio:.12g}")  # 0.4, not 0.4000000000000001
 
 
 def report_stability(args, model, z, out, consequence):
