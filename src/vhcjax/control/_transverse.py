@@ -30,6 +30,7 @@ import numpy as np
 from .._programs import stored_jit
 from .._results import RESULTS, result_codes, results_from_codes
 from ..hybrid import SolverConfig, check_state_shape, multidomain_step
+from ..hybrid._simulate import state_distance
 from ..stability import GAIT_TOL, guard_normal
 from ._actuated import actuated_vector_field, is_multidomain, num_inputs
 
@@ -110,7 +111,8 @@ class TransverseSystem(eqx.Module):
     - `Phi`: transition matrix of $d\\zeta/ds = (dt/ds) A\\zeta$ over $[0, 1]$.
     - `multipliers`: eigenvalues of $J\\Phi$, by modulus (descending).
     - `x_plus`, `x_minus`: post- and pre-impact orbit states.
-    - `closure`: $\\|F(x_\\star^-) - x_\\star^+\\|_\\infty$, how well the tabulated orbit closes.
+    - `closure`: $\\|F(x_\\star^-) - x_\\star^+\\|_\\infty$ in the walker's own units
+      (velocities times `model.time_scale`), how well the tabulated orbit closes.
     - `result`: a `RESULTS` code.
     """
 
@@ -224,7 +226,7 @@ def _tabulate(model, x_start, theta_minus, num_points, domain, x_next):
         _sorted_eigvals(J @ Phi),
         x_start,
         x_minus,
-        jnp.max(jnp.abs(xp - x_next)),
+        state_distance(model, xp, x_next)[0],
         code,
     )
 
@@ -266,7 +268,7 @@ def transverse_system(model, x_plus, *, num_points=401):
         system = _tabulate(model, x_plus, q_minus[0], num_points, None, x_plus)
     # an invalid model, or a state whose orbit does not come back to it: no gait
     code = system.result
-    off = system.closure > GAIT_TOL * jnp.maximum(1.0, jnp.max(jnp.abs(x_plus)))
+    off = system.closure > GAIT_TOL * state_distance(model, x_plus, x_plus)[1]
     code = RESULTS.where((code == RESULTS.successful) & off, RESULTS.orbit_not_closed, code)
     code = RESULTS.where(model.validate(), code, RESULTS.bad_input)
     return eqx.tree_at(lambda t: t.result, system, code)

@@ -84,16 +84,34 @@ def _event(model, gate=False):
     )
 
 
-def _units(model, latch=False):
+def _units(model, latch=False, n=None):
     """The swing's own units: time $T$ = `model.time_scale`, angles 1, velocities $1/T$
     (and, with `latch`, the latch of `_latched`: $T L^3$, $L$ the walker's length unit),
-    so that the integration tolerances do not depend on the walker's size or gravity."""
+    so that the integration tolerances do not depend on the walker's size or gravity.
+    `n`: the number of coordinates (default `model.n_dof`)."""
     t = jnp.asarray(model.time_scale, dtype=float)
-    n = model.n_dof
+    n = model.n_dof if n is None else n
     parts = [jnp.ones((n,)), jnp.ones((n,)) / t]
     if latch:
         parts.append((t * model.scales()["length"] ** 3)[None])
     return t, jnp.concatenate(parts)
+
+
+def state_distance(model, x, x_ref):
+    """$\\max_i |x_i - x_{\\mathrm{ref},i}| / Y_i$ and $\\max(1, \\max_i |x_{\\mathrm{ref},i}| / Y_i)$:
+    the distance of two states and the size of the reference in the walker's own units
+    (`_units`: angles, and velocities times `model.time_scale`). Traceable."""
+    x, x_ref = jnp.asarray(x), jnp.asarray(x_ref)
+    unit = _units(model, n=x_ref.shape[-1] // 2)[1]
+    return jnp.max(jnp.abs(x - x_ref) / unit), jnp.maximum(1.0, jnp.max(jnp.abs(x_ref) / unit))
+
+
+def controller(model, config, latch=False):
+    """The adaptive step-size controller of a swing solve with `config`'s tolerances in
+    the walker's own units (`_units`): the absolute tolerance of each state component is
+    `config.atol` times its unit, which is the same controller as integrating the scaled
+    state $y/Y$ (the step-size selection in diffrax is invariant to the time unit)."""
+    return diffrax.PIDController(rtol=config.rtol, atol=config.atol * _units(model, latch)[1])
 
 
 def flow(
@@ -113,7 +131,8 @@ def flow(
     (or, with `gate=True`, where the strike gate opens; or at a `diffrax.Event` of the
     caller's given as `event`; `event=False`: at `t1`).
 
-    Low-level building block (also used for pushes and dense output). Returns the diffrax
+    Tolerances in the walker's own units (`controller`, `_units`). Low-level building
+    block (also used for pushes and dense output). Returns the diffrax
     `Solution`.
     """
     vf = model.vector_field if vector_field is None else vector_field
@@ -140,7 +159,7 @@ def flow(
         t1=t1,
         dt0=None,
         y0=x0,
-        stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
+        stepsize_controller=controller(model, config),
         saveat=diffrax.SaveAt(t1=True) if saveat is None else saveat,
         event=_event(model, gate) if event is True else (event or None),
         max_steps=config.max_steps,
@@ -240,7 +259,7 @@ def _swing(model, x0, t_max, alive, config, adjoint, vector_field):
             t1=t1,
             dt0=None,
             y0=y0,
-            stepsize_controller=diffrax.PIDController(rtol=config.rtol, atol=config.atol),
+            stepsize_controller=controller(model, config, latch=True),
             saveat=diffrax.SaveAt(t1=True),
             event=event,
             max_steps=config.max_steps,

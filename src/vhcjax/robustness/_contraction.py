@@ -119,7 +119,7 @@ def contraction(
     z_star = jnp.asarray(z_star, dtype=float)
     key = jax.random.PRNGKey(0) if key is None else key
     J, mr = _jacobian_and_step(model, z_star, config)
-    check_returns(z_star, mr.z_next, "contraction", str(result_names(mr.result)))
+    check_returns(model, z_star, mr.z_next, "contraction", str(result_names(mr.result)))
     ev = np.linalg.eigvals(np.asarray(J)).astype(complex)  # complex even when all are real
     ev = ev[np.argsort(-np.abs(ev))]
     rho = float(np.abs(ev[0]))

@@ -178,7 +178,7 @@ def _gait_sensitivity_norm(model, x_star, num_steps, config):
 
     b, t_h = jax.jacfwd(disturbed)(jnp.asarray(0.0))
     (A, c), sr = jax.jacfwd(normal, has_aux=True)(x_star)
-    periodic = returns_to(model.state_to_section(x_star), model.state_to_section(sr.x_plus))
+    periodic = returns_to(model, model.state_to_section(x_star), model.state_to_section(sr.x_plus))
     code = RESULTS.where(
         sr.result == RESULTS.successful,
         RESULTS.where(periodic, RESULTS.successful, RESULTS.not_a_gait),

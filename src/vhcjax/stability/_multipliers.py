@@ -20,6 +20,7 @@ from .._batching import padded_map
 from .._programs import stored_jit
 from .._results import RESULTS, result_codes, result_names
 from ..hybrid import DEFAULT_CONFIG, flow, step_map, step_unchecked
+from ..hybrid._simulate import state_distance
 from ._transverse import TransverseLinearization, transverse_linearization
 
 
@@ -126,17 +127,21 @@ def _transverse_checks(model, x0, sr, tl, pm, config):
     return code, disagreement, condition
 
 
-#: How far (section coordinates, relative to max(1, |z|)) one step may move a state for
-#: it to count as a period-1 gait in `gait_multipliers`: gaits found by the searches
-#: close to about 1e-10.
+#: How far one step may move a state for it to count as a period-1 gait in
+#: `gait_multipliers` (`returns_to`: in the walker's own units, relative to max(1, |x|)):
+#: gaits found by the searches close to about 1e-10.
 GAIT_TOL = 1e-6
 
 
-def returns_to(z, z_next):
-    """Whether one step from the section point `z` came back to it: `z_next` within
-    `GAIT_TOL` $\\max(1, \\|z\\|_\\infty)$ (False where not finite). Traceable."""
-    moved = jnp.max(jnp.abs(jnp.asarray(z_next) - jnp.asarray(z)))
-    return moved <= GAIT_TOL * jnp.maximum(1.0, jnp.max(jnp.abs(jnp.asarray(z))))
+def returns_to(model, z, z_next):
+    """Whether one step of `model` from the section point `z` came back to it: `z_next`
+    within `GAIT_TOL` $\\max(1, \\|x\\|_\\infty)$ of it, states compared in the walker's
+    own units (angles, and velocities times `model.time_scale`), so that the test is the
+    same for a walker and its rescaled copy (False where not finite). Traceable."""
+    moved, size = state_distance(
+        model, model.section_to_state(jnp.asarray(z_next)), model.section_to_state(jnp.asarray(z))
+    )
+    return moved <= GAIT_TOL * size
 
 
 @stored_jit
@@ -155,7 +160,7 @@ def _gait_multipliers(model, z, config=DEFAULT_CONFIG, transverse=True):
     J, sr = jax.jacfwd(step, has_aux=True)(z)
     pm = _sort(jnp.linalg.eigvals(J))
     # multipliers are those of a fixed point of the step map only
-    periodic = returns_to(z, model.state_to_section(sr.x_plus))
+    periodic = returns_to(model, z, model.state_to_section(sr.x_plus))
     code = RESULTS.where(
         sr.result == RESULTS.successful,
         RESULTS.where(

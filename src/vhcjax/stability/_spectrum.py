@@ -48,7 +48,7 @@ def _spectrum_one(model, gait, config):
     # A gait of this model: valid parameters, and one step from it comes back to it.
     valid = model.validate() if hasattr(model, "validate") else jnp.asarray(True)
     back = step_map(detach(model), jax.lax.stop_gradient(z), 1, config)
-    periodic = (back.result == RESULTS.successful) & returns_to(z, back.z_next)
+    periodic = (back.result == RESULTS.successful) & returns_to(model, z, back.z_next)
     code = RESULTS.where(
         ~valid,
         RESULTS.bad_input,
