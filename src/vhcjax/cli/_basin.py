@@ -13,6 +13,7 @@ from ._common import (
     CLIError,
     add_model_choice,
     check_figure_file,
+    check_state,
     count,
     describe,
     figure_output,
@@ -121,6 +122,10 @@ def run_basin(args):
             else in_walker_units(model, 0.4, "rate")
             for a in axes
         ]
+    kinds = ["angle" if AXIS_NAMES[a] == "q1" else "rate" for a in axes]
+    check_state(model, args.half_widths, kinds, "--half-widths")
+    if args.box is not None:
+        check_state(model, args.box, ["angle", "rate", "rate"], "--box")
     if args.box is None:  # the thesis walker's box, in this walker's units
         q, dq1, dq2 = BOX
         rate = lambda v: in_walker_units(model, v, "rate")  # noqa: E731

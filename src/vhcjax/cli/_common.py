@@ -188,11 +188,29 @@ def number(kind=float, *, lo=None, hi=None, lo_open=False, hi_open=False):
 
 FINITE = number(float)
 POSITIVE = number(float, lo=0.0, lo_open=True)
-#: Largest magnitude of a state entry on the command line (rad, rad/s): far beyond any
-#: walking motion, and a bound that keeps the integrators' arithmetic finite.
+#: Largest magnitude of a state entry on the command line, in the walker's own units
+#: (angles in rad, rates times T = sqrt(l/g)): 1000 rad and rad/s for the thesis's walker,
+#: far beyond any walking motion, and a bound that keeps the integrators' arithmetic
+#: finite. Checked by `check_state` once the walker is known.
 MAX_STATE = 1e3
-STATE = number(float, lo=-MAX_STATE, hi=MAX_STATE)
-HALF_WIDTH = number(float, lo=0.0, lo_open=True, hi=MAX_STATE)
+STATE = FINITE
+HALF_WIDTH = POSITIVE
+
+
+def check_state(model, values, kinds, flag):
+    """`values` (rad for `"angle"`, rad/s for `"rate"` in `kinds`) within `MAX_STATE`
+    in the same proportion to `model`'s own units as 1000 rad/s to the thesis walker's,
+    else a one-line `CLIError` naming `flag`."""
+    from ._analysed import in_walker_units
+
+    limits = {"angle": MAX_STATE, "rate": in_walker_units(model, MAX_STATE, "rate")}
+    for v, kind in zip(values, kinds):
+        if abs(v) > limits[kind]:
+            raise CLIError(
+                f"{flag}: {'an angle' if kind == 'angle' else 'a rate'} of {v:g} "
+                f"{'rad' if kind == 'angle' else 'rad/s'} is beyond {limits[kind]:.4g} "
+                "(far from any walking motion of this walker)"
+            )
 
 
 def count(lo=1, hi=100_000):
@@ -431,6 +449,8 @@ def find_walker_gait(args, model, family="stable", guess=None, flag=None):
 
     check_method(args, model)
     method = getattr(args, "method", "auto")
+    if guess is not None:  # section coordinates: q1, then rates
+        check_state(model, guess, ["angle"] + ["rate"] * (len(guess) - 1), flag or "guess")
     g = None if guess is None else jnp.asarray(guess, float)
     gait = find_gait(model, family, method, g, throw=False)
     code = str(result_names(gait.result))

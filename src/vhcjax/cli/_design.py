@@ -66,7 +66,8 @@ def register(subparsers):
         "--bounds",
         metavar="NAME=LO:HI,...",
         help="bounds of varied parameters (SI units), e.g. mass-hip=1:40,a=0.1:0.9; "
-        "default mass 1:40 (hip) 1:20 (leg) kg, lengths 0.1:0.9 m, gravity 1:20",
+        "default mass 1:40 (hip) 1:20 (leg) kg, lengths 0.1:0.9 m, gravity 1:20 m/s^2 "
+        "for the thesis's walker (20 kg, 1 m), in the same proportion for others",
     )
     p.add_argument(
         "--steps", type=count(1, 10_000), default=30, help="iterations at most (default 30)"
@@ -237,11 +238,12 @@ def run_design(args):
     _positive("--learning-rate", args.learning_rate)
     if args.learning_rate > 1:
         raise CLIError(f"--learning-rate must be at most 1, got {args.learning_rate}")
-    from ..parameters import DEFAULT_BOUNDS, parameters_of
+    from ..parameters import default_bounds, parameters_of
 
     start = parameters_of(model)
+    defaults = default_bounds(model)
     for name in vary:
-        lo, hi = bounds.get(name, DEFAULT_BOUNDS[name])
+        lo, hi = bounds.get(name, defaults[name])
         if not lo <= start[name] <= hi:
             raise CLIError(f"--{name} = {start[name]} is outside its bounds {lo}:{hi}")
     bar = progress(total=args.steps + 1, desc=f"design {args.objective}")

@@ -4,6 +4,7 @@ push survived."""
 from ._analysed import add_analysis_flags, analysed_gait, progress_bar, report_stability
 from ._common import (
     FINITE,
+    POSITIVE,
     CLIError,
     check_figure_file,
     count,
@@ -36,13 +37,14 @@ def register(subparsers):
     )
     p.add_argument(
         "--duration",
-        type=number(float, lo=0.0, hi=10.0),
+        type=number(float, lo=0.0),
         default=0.0,
-        help="pulse duration in s (0: instantaneous impulse, magnitudes in N s)",
+        help="pulse duration in s (0: instantaneous impulse, magnitudes in N s); the pulse "
+        "must end before the gait's heel strike",
     )
     p.add_argument(
         "--max",
-        type=number(float, lo=0.0, hi=1e6, lo_open=True),
+        type=POSITIVE,
         default=None,
         help="bisection upper bound (N s, or N with --duration; default 20 for the "
         "thesis's 20 kg walker, in proportion to the walker's own impulse or force unit)",
@@ -107,8 +109,15 @@ def run_push(args):
         zad = np.einsum("ij,sjk->sik", np.asarray(lin.P_plus), np.asarray(D))
         out["transverse_dzeta_dP"] = Z
         out["max_abs_difference_autodiff_vs_transverse"] = float(np.max(np.abs(zad - Z)))
+    bound = push_bound(model, args.duration)
     if args.max is None:
-        args.max = float(f"{push_bound(model, args.duration):.12g}")  # 20, not 20.000000000000004
+        args.max = float(f"{bound:.12g}")  # 20, not 20.000000000000004
+    elif args.max > 5e4 * bound:  # 1e6 N s for the thesis's walker
+        unit = "N s" if args.duration == 0 else "N"
+        raise CLIError(
+            f"--max {args.max:g} {unit} is beyond {5e4 * bound:.4g} {unit}, 50,000 times the "
+            "default bound for this walker (far from any push it could survive)"
+        )
     res = max_push(
         model,
         x_star,

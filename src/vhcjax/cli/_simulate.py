@@ -11,6 +11,7 @@ from ._common import (
     add_model_flags,
     check_output_dir,
     check_output_file,
+    check_state,
     count,
     describe,
     figure_output,
@@ -86,14 +87,25 @@ def _check_start(model, x0):
         )
 
 
+def _thesis_start(model):
+    """Thesis (7.5), its rates in the same proportion to `model`'s time unit."""
+    from ._analysed import in_walker_units
+
+    q1, q2, dq1, dq2 = THESIS_7_5
+    return [q1, q2, in_walker_units(model, dq1, "rate"), in_walker_units(model, dq2, "rate")]
+
+
 def _reference_start(model):
     """The post-impact state of the model's reference gait (the kneed walker's at 0.0504
     rad, the simplest walker's at 0.009 rad), moved to the slope of `model` (the same
     section point)."""
     import jax.numpy as jnp
 
-    _, z = model.reference_gait()
-    return [float(v) for v in model.section_to_state(jnp.asarray(z))]
+    from ..hybrid._simulate import section_units
+
+    ref, z = model.reference_gait()
+    z = jnp.asarray(z) * section_units(model) / section_units(ref)  # rates in its units
+    return [float(v) for v in model.section_to_state(z)]
 
 
 def steps_as_dicts(sim):
@@ -129,10 +141,12 @@ def run(args):
 
     model = walker_from_args(args)
     if args.x0 is None:
-        args.x0 = list(THESIS_7_5) if args.model == "compass" else _reference_start(model)
+        args.x0 = _thesis_start(model) if args.model == "compass" else _reference_start(model)
     if len(args.x0) != 2 * model.n_dof:
         names = "Q1 Q2 DQ1 DQ2" if model.n_dof == 2 else "Q1 Q2 Q3 DQ1 DQ2 DQ3"
         raise CLIError(f"--x0 takes {2 * model.n_dof} numbers ({names}) here, got {len(args.x0)}")
+    n = model.n_dof
+    check_state(model, args.x0, ["angle"] * n + ["rate"] * n, "--x0")
     if hasattr(model, "hip_height"):  # the compass gait
         _check_start(model, args.x0)
     elif bool(model.fallen(jnp.asarray(args.x0[:3], float))):

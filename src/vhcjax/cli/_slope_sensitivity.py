@@ -10,11 +10,12 @@ from ._analysed import (
     report_stability,
 )
 from ._common import (
+    FINITE,
+    CLIError,
     check_figure_file,
     count,
     describe,
     figure_output,
-    number,
     print_json,
     second_figure,
     warn,
@@ -37,10 +38,11 @@ def register(subparsers):
     )
     p.add_argument(
         "--heights-mm",
-        type=number(float, lo=-500.0, hi=500.0),
+        type=FINITE,
         nargs="+",
-        default=[-15, -12, -5, 2, 5],
-        help="floor steps (mm, + up) for the recovery curves",
+        default=None,
+        help="floor steps (mm, + up) for the recovery curves, each at most half a leg "
+        "length; default -15 -12 -5 2 5 mm per metre of leg (a+b)",
     )
     p.add_argument("--steps", type=count(1, 100_000), default=40, help="steps after the floor step")
     p.add_argument(
@@ -105,7 +107,7 @@ def run_slope(args):
         )
         out["max_step_reason"] = reason
         warn(args, reason)
-    hs = jnp.asarray(np.asarray(args.heights_mm) / 1000.0)
+    hs = jnp.asarray(_heights_m(args, model))
     rec = terrain_recovery(model, x_star, hs, args.steps, 1e-4)
     out["recovery"] = {"heights_m": hs, "label": rec.label, "steps": rec.steps}
     if args.png:
@@ -185,3 +187,20 @@ def _print_slope(args, out, th, rec):
             what = OUTCOME[label]
         parts.append(f"{h:+g} mm: {what}")
     print(f"recovery after a floor step (+ up, within {args.steps} steps): " + "; ".join(parts))
+
+
+def _heights_m(args, model):
+    """--heights-mm in metres: as given (each at most half a leg length), or the thesis
+    walker's -15, -12, -5, 2, 5 mm in proportion to the leg length."""
+    import numpy as np
+
+    leg = float(model.scales()["length"])  # a + b, m
+    if args.heights_mm is None:
+        return np.array([-15.0, -12.0, -5.0, 2.0, 5.0]) * leg / 1000.0
+    hs = np.asarray(args.heights_mm, float) / 1000.0
+    if np.max(np.abs(hs)) > 0.5 * leg:
+        raise CLIError(
+            f"--heights-mm: a floor step of {np.max(np.abs(hs)) * 1000:g} mm is more than "
+            f"half the leg length ({leg * 1000:g} mm)"
+        )
+    return hs

@@ -14,7 +14,6 @@ from ._common import (
     count,
     figure_output,
     find_walker_gait,
-    number,
     print_json,
     read_numbers,
     shown,
@@ -52,9 +51,15 @@ def register(subparsers):
         default=None,
         metavar="Q1,Q2,...",
         help="diagonal LQR weights per second on the transverse coordinates, 0 or in "
-        "[1e-8, 1e8], not all 0, "
-        "also the heel-strike weight: compass gait (delta q2, delta dq1, delta dq2), "
+        "[1e-8, 1e8], not all 0: compass gait (delta q2, delta dq1, delta dq2), "
         "kneed walker (delta q2, delta q3, delta dq1, delta dq2, delta dq3); default all 1",
+    )
+    p.add_argument(
+        "--q-jump",
+        default=None,
+        metavar="Q1,Q2,...",
+        help="diagonal LQR weights per heel strike on the same coordinates, 0 or in "
+        "[1e-8, 1e8] (default: the --q numbers)",
     )
     p.add_argument(
         "--r",
@@ -73,11 +78,12 @@ def register(subparsers):
     )
     p.add_argument(
         "--perturbation",
-        type=number(float, lo=0.0, hi=1.0),
-        default=1e-2,
-        metavar="D",
-        help="added to every post-impact section coordinate for the simulation "
-        "(rad, rad/s; default 0.01)",
+        default=None,
+        metavar="D[,D2,D3]",
+        help="added to the post-impact section coordinates q1, dq1, dq2 for the "
+        "simulation (rad, rad/s, rad/s; one value for all), each in [0, 1] rad or "
+        "[0, 1/T] rad/s, T = sqrt(l/g); default 0.01 rad and 0.01 rad/s for the thesis's "
+        "walker, the same in its own units for others",
     )
     p.add_argument(
         "--steps", type=count(1, 10_000), default=30, help="simulated steps (default 30)"
@@ -131,6 +137,12 @@ def _weights(args):
         raise CLIError(f"--q must be >= 0 and not all zero, got {shown(text)}")
     if max(q) > hi or min(v for v in q if v > 0) < lo:
         raise CLIError(f"--q: each nonzero weight must be in [{lo:g}, {hi:g}], got {shown(text)}")
+    text = args.q_jump if args.q_jump is not None else ",".join(f"{v!r}" for v in q)
+    q_jump = _numbers("--q-jump", text, len(coords), coords)
+    if min(q_jump) < 0 or (max(q_jump) > 0 and min(v for v in q_jump if v > 0) < lo):
+        raise CLIError(f"--q-jump: each weight must be 0 or in [{lo:g}, {hi:g}], got {shown(text)}")
+    if max(q_jump) > hi:
+        raise CLIError(f"--q-jump: each weight must be 0 or in [{lo:g}, {hi:g}], got {shown(text)}")
     text = args.r if args.r is not None else "1"
     n = 1 if "," not in text else len(torques)
     r = _numbers("--r", text, n, torques)
@@ -138,7 +150,38 @@ def _weights(args):
         raise CLIError(f"--r must be positive, got {shown(text)}")
     if max(r) > hi or min(r) < lo:
         raise CLIError(f"--r: each weight must be in [{lo:g}, {hi:g}], got {shown(text)}")
-    return q, r * (len(torques) // n)
+    return q, r * (len(torques) // n), q_jump
+
+
+def _read_perturbation(args):
+    """--perturbation as 3 numbers (q1, dq1, dq2), or `None` for the default."""
+    if args.perturbation is None:
+        return None
+    values = read_numbers(args.perturbation, "--perturbation")
+    if len(values) not in (1, 3):
+        raise CLIError(f"--perturbation needs 1 or 3 values (q1, dq1, dq2), got {len(values)}")
+    check_finite("--perturbation", *values)
+    if min(values) < 0:
+        raise CLIError(f"--perturbation must be >= 0, got {shown(args.perturbation)}")
+    return values * (3 // len(values))
+
+
+def _perturbation(values, model):
+    """The perturbation per section coordinate (q1, dq1, dq2): as given (each at most
+    1 rad or 1/T rad/s), or the thesis walker's 0.01 rad and 0.01 rad/s in `model`'s own
+    units."""
+    from ._analysed import in_walker_units
+
+    if values is None:
+        rate = in_walker_units(model, 0.01, "rate")
+        return [0.01, rate, rate]
+    rate_unit = 1.0 / float(model.time_scale)
+    if any(v > b for v, b in zip(values, (1.0, rate_unit, rate_unit))):
+        raise CLIError(
+            f"--perturbation: each value must be at most 1 rad (q1) or {rate_unit:.4g} rad/s "
+            f"(dq1, dq2: 1/T, T = sqrt(l/g) of this walker), got {values}"
+        )
+    return values
 
 
 def _check(args):
@@ -152,13 +195,11 @@ def _check(args):
     if args.model == "compass" and args.family is None:
         args.family = "unstable"
     weights = _weights(args)
+    args.perturbation_values = _read_perturbation(args)
     if args.torque_limit is not None:
         check_finite("--torque-limit", args.torque_limit)
         if args.torque_limit <= 0:
             raise CLIError(f"--torque-limit must be positive, got {args.torque_limit}")
-    check_finite("--perturbation", args.perturbation)
-    if args.perturbation < 0:
-        raise CLIError(f"--perturbation must be >= 0, got {args.perturbation}")
     if args.steps < 1:
         raise CLIError(f"--steps must be >= 1, got {args.steps}")
     if args.basin_grid is not None and not args.basin:
@@ -187,7 +228,7 @@ def _finite_or_none(obj):
 
 
 def run_stabilize(args):
-    q, r = _check(args)
+    q, r, q_jump = _check(args)
     check_figure_file(args.png, "--png")
     import equinox as eqx
     import jax
@@ -197,14 +238,16 @@ def run_stabilize(args):
     from .. import control
     from .._results import RESULTS, result_names
     from ..hybrid import FAST_CONFIG
+    from ..hybrid._simulate import section_units
     from ..plotting import plot_stabilization
 
     kneed = args.model == "kneed"
     model = walker_from_args(args)
+    perturbation = _perturbation(args.perturbation_values, model)
     gait, _ = find_walker_gait(args, model, args.family or "stable")
     z = model.state_to_section(gait.x_plus)
     limit = math.inf if args.torque_limit is None else args.torque_limit
-    st = control.stabilize(model, z, jnp.asarray(q), jnp.asarray(r))
+    st = control.stabilize(model, z, jnp.asarray(q), jnp.asarray(r), jnp.asarray(q_jump))
     st = eqx.tree_at(lambda s: s.feedback, st, control.with_torque_limit(st.feedback, limit))
     zn = np.asarray(z)
     out = {
@@ -213,7 +256,7 @@ def run_stabilize(args):
         "family": args.family,
         "model": args.model,
         "gait": zn,
-        "weights": {"q": q, "r": r if kneed else r[0], "q_jump": q},
+        "weights": {"q": q, "r": r if kneed else r[0], "q_jump": q_jump},
         "torques": list(_TORQUES[args.model]),
         "torque_limit": args.torque_limit,
         "open_loop_multipliers": st.open_loop_multipliers,
@@ -248,17 +291,21 @@ def run_stabilize(args):
             print(f"vhcjax stabilize: {out['reason']}", file=sys.stderr)
         return 1
 
-    x0 = model.section_to_state(z + args.perturbation)
+    x0 = model.section_to_state(z + jnp.asarray(perturbation))
+    # errors in the walker's own units: angles, and rates times T = sqrt(l/g)
+    unit = np.asarray(section_units(model))
+    size = float(np.max(np.asarray(perturbation) / unit))
     sim = control.simulate_closed_loop(model, x0, st.feedback, args.steps)
     zero = control.ZeroFeedback(len(_TORQUES[args.model]))
     passive = control.simulate_closed_loop(model, x0, zero, args.steps)
 
     def errors(s):
         zs = np.asarray(jax.vmap(model.state_to_section)(s.steps.x_plus))
-        return np.max(np.abs(zs - zn), axis=1)
+        return np.max(np.abs(zs - zn) / unit, axis=1)
 
     err_c, err_p = errors(sim), errors(passive)
     out["simulation"] = {
+        "perturbation": perturbation,
         "x0": x0,
         "x_final": sim.steps.x_plus[-1],
         "steps": args.steps,
@@ -286,7 +333,7 @@ def run_stabilize(args):
     # came back: a saturated torque or a start outside the basin may keep it away
     sim_out = out["simulation"]
     sim_out["recovered"] = bool(
-        int(sim.num_successful) == args.steps and err_c[-1] <= max(0.1 * args.perturbation, 1e-8)
+        int(sim.num_successful) == args.steps and err_c[-1] <= max(0.1 * size, 1e-8)
     )
     if stable and not sim_out["recovered"]:
         done = int(sim.num_successful)
@@ -301,7 +348,7 @@ def run_stabilize(args):
         ) >= args.torque_limit * (1 - 1e-9)
         if saturated:
             cause = f"the torque limit of {args.torque_limit:g} N m saturates the feedback"
-        elif done == args.steps and err_c[-1] < args.perturbation:
+        elif done == args.steps and err_c[-1] < size:
             cause = (
                 f"the error is still decaying (closed-loop spectral radius {rho:.3g}): "
                 "more --steps may show it recovered"
@@ -310,14 +357,17 @@ def run_stabilize(args):
             cause = "the perturbation may lie outside the closed-loop basin"
         sim_out["recovered_reason"] = (
             f"stable is the local verdict (closed-loop multipliers inside the unit circle), "
-            f"but the simulation from +{args.perturbation:g} was not recovered ({how}): "
+            f"but the simulation from the perturbed gait was not recovered ({how}): "
             f"{cause}"
         )
         warn(args, sim_out["recovered_reason"])
     basin_plot = None
     if args.basin:
+        from ._analysed import in_walker_units
+
+        half_widths = [0.05, in_walker_units(model, 0.3, "rate")]  # the thesis walker's
         kw = {
-            "half_widths": (0.05, 0.3),
+            "half_widths": tuple(half_widths),
             "shape": (args.basin_grid, args.basin_grid),
             "num_steps": 25,
             "tol": 1e-4,
@@ -331,7 +381,7 @@ def run_stabilize(args):
         trms = np.asarray(bc.rms_torque)[conv]
         out["basin"] = {
             "axes": ["q1", "dq1"],
-            "half_widths": [0.05, 0.3],
+            "half_widths": half_widths,
             "grid": args.basin_grid,
             "passive_fraction": float(bp.fraction),
             "closed_loop_fraction": float(bc.fraction),
@@ -366,7 +416,8 @@ def run_stabilize(args):
             else f"Compass gait, {args.family} period-1 gait at {args.slope_deg:g} deg, "
             "stabilized by a hip torque"
         )
-        title = f"{case} ({weights}, {lim}); perturbation {args.perturbation:g}"
+        shown_p = ", ".join(f"{v:.3g}" for v in perturbation)
+        title = f"{case} ({weights}, {lim}); perturbation ({shown_p}) rad, rad/s, rad/s"
         s_grid = np.asarray(st.system.domains[0].s if kneed else st.system.s)
         with figure_output(args.png) as fh:
             plot_stabilization(
@@ -428,9 +479,11 @@ def _print_stabilize(args, out, zn, check):
             return s[key + "_reason"].split(";")[0]
         return f"error {s[key]:.2e} after {args.steps} steps"
 
+    p = s["perturbation"]
     print(
-        f"from the gait's post-impact state + {args.perturbation:g} (rad, rad/s) on each of "
-        f"q1, dq1, dq2 (error: largest deviation from the gait after impact, rad or rad/s):"
+        f"from the gait's post-impact state + ({p[0]:.3g} rad, {p[1]:.3g} rad/s, "
+        f"{p[2]:.3g} rad/s) on (q1, dq1, dq2) (error: largest deviation from the gait "
+        "after impact in the walker's units: rad, and rad/s times sqrt(l/g)):"
     )
     print(f"  with feedback: {end('final_error')} (largest torque {s['max_abs_torque']:.4g} N m)")
     print(f"  without feedback: {end('passive_final_error')}")
@@ -438,7 +491,8 @@ def _print_stabilize(args, out, zn, check):
         b = out["basin"]
         print(
             f"basin slice in (q1, dq1), {args.basin_grid} x {args.basin_grid} starts within "
-            "+-0.05 rad and +-0.3 rad/s of the gait: converging fraction "
+            f"+-{b['half_widths'][0]:g} rad and +-{b['half_widths'][1]:.4g} rad/s of the gait: "
+            "converging fraction "
             f"{b['passive_fraction']:.3f} without feedback, {b['closed_loop_fraction']:.3f} "
             "with feedback"
         )

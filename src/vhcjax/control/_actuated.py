@@ -128,7 +128,7 @@ def step_torque(model, x0, period, feedback, num_points=64, config=DEFAULT_CONFI
     sol = flow(
         model,
         x0,
-        period + 1e-12,
+        period + 1e-12 * model.time_scale,
         config,
         saveat=diffrax.SaveAt(ts=ts),
         event=False,
@@ -144,7 +144,14 @@ def _torque_stats(model, x0, feedback, config, alive, num_points):
     if not is_multidomain(model):
         sr = closed_loop_step(model, x0, feedback, config, alive)
         ok = sr.result == RESULTS.successful
-        _, u = step_torque(model, x0, jnp.where(ok, sr.period, 1e-9), feedback, num_points, config)
+        _, u = step_torque(
+            model,
+            x0,
+            jnp.where(ok, sr.period, 1e-9 * model.time_scale),
+            feedback,
+            num_points,
+            config,
+        )
     else:
         sr, ts, xs = dense_cycle(model, x0, num_points, config, alive, _fields(model, feedback))
         ok = sr.result == RESULTS.successful

@@ -22,6 +22,7 @@ import jax.numpy as jnp
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, SolverConfig, check_section_shape, flow
+from ..hybrid._simulate import section_units
 from ..robustness import direction, finish_step, impulse_velocity_jump, swing_from
 from ._actuated import (
     closed_loop_field,
@@ -40,6 +41,7 @@ from ._feedback import (
 from ._riccati import (
     RiccatiSolution,
     _pieces,
+    own_units,
     riccati_backward,
     riccati_hamiltonian,
     weight_matrix,
@@ -48,8 +50,10 @@ from ._transverse import (
     HybridTransverseSystem,
     TransverseSystem,
     cycle_monodromy,
+    free_units,
     phase_field,
     phase_matrices,
+    phase_units,
     solve_in_phase,
     transverse_system,
 )
@@ -92,7 +96,10 @@ def closed_loop_multipliers_transverse(
             return jnp.concatenate([dw, (c * (A - B @ K) @ Phi).reshape(-1)])
 
         y0 = jnp.concatenate([d.w[0], jnp.eye(r).reshape(-1)])
-        sol = solve_in_phase(field, y0, 0.0, 1.0, diffrax.SaveAt(t1=True), rtol, atol, max_steps)
+        wu = phase_units(model)
+        zu = free_units(P, wu)
+        atol_i = atol * jnp.concatenate([wu, (zu[:, None] / zu).reshape(-1)])  # own units
+        sol = solve_in_phase(field, y0, 0.0, 1.0, diffrax.SaveAt(t1=True), rtol, atol_i, max_steps)
         assert sol.ys is not None  # saved at t1
         transitions.append(sol.ys[-1, nw:].reshape(r, r))
     M = cycle_monodromy(bases, k, transitions, [d.J for d in doms])
@@ -125,7 +132,8 @@ class Stabilization(eqx.Module):
     - `riccati`: the `RiccatiSolution` by backward iteration (used for the gains).
     - `riccati_check`: the `RiccatiSolution` by the Hamiltonian monodromy (its `result`
       says when that method does not hold, e.g. `riccati_ill_conditioned`).
-    - `riccati_agreement`: $\\max|X_1 - X_2| / \\max|X_1|$ over the phase grid; NaN when
+    - `riccati_agreement`: $\\max|X_1 - X_2| / \\max|X_1|$ over the phase grid ($X$ in
+      the walker's own units, `own_units`); NaN when
       the check did not succeed.
     - `feedback`: the `TransverseFeedback` law (`HybridTransverseFeedback`: one per
       domain).
@@ -214,7 +222,8 @@ def _stabilize(model, z, Q, R, Q_jump, *, torque_limit, num_points, config):
     system = transverse_system(model, model.section_to_state(z), num_points=num_points)
     ric = riccati_backward(model, system, Q, R, Q_jump)
     ric2 = riccati_hamiltonian(model, system, Q, R, Q_jump)
-    agree = jnp.max(jnp.abs(ric.X - ric2.X)) / jnp.max(jnp.abs(ric.X))
+    own = own_units(model, None, R)  # X on all coordinates, in the walker's own units
+    agree = jnp.max(jnp.abs(own(ric.X - ric2.X))) / jnp.max(jnp.abs(own(ric.X)))
     agree = jnp.where(ric2.result == RESULTS.successful, agree, jnp.nan)
     fb = transverse_feedback(system, ric, torque_limit)
     cl_t = closed_loop_multipliers_transverse(model, system, fb)
@@ -274,10 +283,14 @@ def closed_loop_basin(
 ):
     """Basin slice of the gait `z_star` under `feedback` (use `ZeroFeedback` for the
     passive walker: the same code path). Jittable; all points in one `vmap`.
+    `half_widths`: of the grid along `axes` (rad, rad/s); `tol`: a start converged when
+    the section point after `num_steps` steps is within `tol` of the gait in the walker's
+    own units (angles, and rates times `model.time_scale`).
 
     **Returns:** a `ClosedLoopBasin`.
     """
     z_star = jnp.asarray(z_star, float)
+    unit = section_units(model)
     ox = jnp.linspace(-half_widths[0], half_widths[0], shape[0])
     oy = jnp.linspace(-half_widths[1], half_widths[1], shape[1])
     X, Y = jnp.meshgrid(ox, oy, indexing="ij")
@@ -295,7 +308,7 @@ def closed_loop_basin(
         )
         zf = model.state_to_section(sim.steps.x_plus[-1])
         ok = sim.result == RESULTS.successful
-        conv = ok & (jnp.max(jnp.abs(zf - z_star)) < tol)
+        conv = ok & (jnp.max(jnp.abs(zf - z_star) / unit) < tol)
         return conv, ~ok, jnp.max(sim.max_abs_torque), sim.rms_torque[0]
 
     conv, fell, umax, urms = jax.vmap(one)(Z)
@@ -323,9 +336,10 @@ def closed_loop_push_step(model, feedback, x0, t_push, impulse, config=DEFAULT_C
     n = model.n_dof
     field = closed_loop_field(model, feedback)
     t_max = config.t_max_factor * model.time_scale
-    t_s = jnp.maximum(t_push, 1e-12)
+    tiny = 1e-12 * model.time_scale  # a solve of (almost) zero length
+    t_s = jnp.maximum(t_push, tiny)
     alive = jnp.asarray(alive)
-    sol0 = flow(model, x0, jnp.where(alive, t_s, 1e-12), config, event=False, vector_field=field)
+    sol0 = flow(model, x0, jnp.where(alive, t_s, tiny), config, event=False, vector_field=field)
     assert sol0.ys is not None  # saved at t1
     xs = sol0.ys[-1]
     x_k = xs.at[n:].add(impulse_velocity_jump(model, xs[:n], impulse))
@@ -333,8 +347,8 @@ def closed_loop_push_step(model, feedback, x0, t_push, impulse, config=DEFAULT_C
     x_minus, t_end, code = swing_from(
         model,
         x_k,
-        jnp.where(alive, t_s, 1e-12),
-        jnp.where(alive, t_max, 2e-12),
+        jnp.where(alive, t_s, tiny),
+        jnp.where(alive, t_max, 2 * tiny),
         config,
         vector_field=field,
     )
@@ -347,10 +361,18 @@ def _push_survives(model, feedback, x_star, t_push, impulse, num_steps, tol, con
     sim = simulate_closed_loop(
         model, sr.x_plus, feedback, num_steps, config=config, torque_points=0
     )
-    err = jnp.max(
+    err = jnp.max(  # in the walker's own units
         jnp.abs(model.state_to_section(sim.steps.x_plus[-1]) - model.state_to_section(x_star))
+        / section_units(model)
     )
     return (sr.result == RESULTS.successful) & (sim.result == RESULTS.successful) & (err < tol)
+
+
+def _default_push(model):
+    """`vhcjax.push_bound(model)` (traceable): 20 N s for the thesis's 20 kg walker, in
+    proportion to the walker's impulse unit $M\\sqrt{gL}$."""
+    sc = model.scales()
+    return sc["mass"] * jnp.sqrt(sc["acceleration"] * sc["length"] / 9.81)
 
 
 def closed_loop_max_push(
@@ -361,15 +383,17 @@ def closed_loop_max_push(
     phases,
     angles,
     *,
-    p_max=20.0,
+    p_max=None,
     iterations=10,
     num_steps=30,
     tol=1e-4,
     config=DEFAULT_CONFIG,
 ):
     """Largest hip impulse (N s) after which the walker under `feedback` returns within
-    `tol` of the gait in `num_steps` steps, per phase and direction (bisection on
-    $[0, p_{max}]$ assuming survival is monotone in the magnitude; `vmap` over the grid).
+    `tol` of the gait (in the walker's own units: angles, and rates times its time unit)
+    in `num_steps` steps, per phase and direction (bisection on $[0, p_{max}]$ assuming
+    survival is monotone in the magnitude; `vmap` over the grid). `p_max`: default
+    `vhcjax.push_bound(model)` (20 N s for the thesis's walker).
 
     - `x_star`, `period`: post-impact state and step time of the gait.
     - `phases`: fractions of `period` at which the push acts; `angles`: directions (rad,
@@ -394,7 +418,12 @@ def closed_loop_max_push(
             good = ok(mid)
             return jnp.where(good, mid, lo), jnp.where(good, hi, mid)
 
-        lo, _ = jax.lax.fori_loop(0, iterations, body, (jnp.zeros(()), jnp.asarray(p_max, float)))
+        lo, _ = jax.lax.fori_loop(
+            0,
+            iterations,
+            body,
+            (jnp.zeros(()), jnp.asarray(_default_push(model) if p_max is None else p_max, float)),
+        )
         return jnp.where(ok(jnp.zeros(())), lo, 0.0)
 
     return jax.vmap(one)(P.reshape(-1), A.reshape(-1)).reshape(P.shape)

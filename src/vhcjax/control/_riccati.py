@@ -39,8 +39,10 @@ from ._actuated import num_inputs
 from ._transverse import (
     HybridTransverseSystem,
     cycle_order,
+    free_units,
     phase_field,
     phase_matrices,
+    phase_units,
     reduce,
     reduced_jump,
     solve_in_phase,
@@ -154,6 +156,26 @@ def _sym(X):
     return 0.5 * (X + X.T)
 
 
+def cost_unit(model, R):
+    """The unit of the LQR cost: the cost per second of a torque of the walker's unit
+    ($M L^2/T^2$, from `model.scales`) held over its time unit $T$, weighted by the mean
+    diagonal of `R`."""
+    sc = model.scales()
+    T = jnp.asarray(model.time_scale, dtype=float)
+    torque = sc["mass"] * sc["length"] ** 2 / T**2
+    return jnp.mean(jnp.diag(R)) * torque**2 * T
+
+
+def own_units(model, P, R):
+    """`X -> X'`: a Riccati matrix on the free coordinates of basis `P` in the walker's
+    own units, $X'_{ij} = X_{ij} u_i u_j / c$ ($u$ the coordinates' units, $c$ the cost's,
+    `cost_unit`): the same numbers for a walker and its rescaled copy under weights that
+    pose it the same problem."""
+    zu = free_units(P, phase_units(model))
+    c = cost_unit(model, R)
+    return lambda X: X * jnp.outer(zu, zu) / c
+
+
 def _phase_functions(model, d, P, domain):
     """`(matrices, orbit)` of domain `d`: $(A, B, dt/ds)$ in free coordinates, and the
     orbit's rate $dw_\\star/ds$, at phase `s` and orbit point `w`."""
@@ -192,9 +214,11 @@ def riccati_backward(
       strike only).
     - `Q`, `R`, `Q_jump`: weights (matrices or diagonals, on all $2n-1$ coordinates);
       default identities, and `Q_jump = Q`.
-    - `tol`: stop when $\\max|\\Delta X(1^-)| \\le$ `tol` $(1 + \\max|X(1^-)|)$.
+    - `tol`: stop when $\\max|\\Delta X(1^-)| \\le$ `tol` $(1 + \\max|X(1^-)|)$, $X$ in
+      the walker's own units (`own_units`).
     - `max_iterations`: sweeps at most (else `not_converged`).
-    - `rtol`, `atol`, `max_steps`: settings of the backward integration (Tsit5).
+    - `rtol`, `atol`, `max_steps`: settings of the backward integration (Tsit5), `atol`
+      in the walker's own units (`own_units`).
 
     **Returns:** a `RiccatiSolution`.
     """
@@ -205,12 +229,15 @@ def riccati_backward(
     Qs = [reduce(P, Q) for P in bases]
     Qjs = _jump_weights(bases, Q_jump)
     Js = [reduced_jump(bases, d.J, i) for i, d in enumerate(doms)]
+    wu, cost = phase_units(model), cost_unit(model, R)
 
     def sweeper(i):
         d, P = doms[i], bases[i]
         r = Qs[i].shape[0]
         matrices, orbit = _phase_functions(model, d, P, dom(i))
         Qi = Qs[i]
+        zu = free_units(P, wu)
+        atol_i = atol * jnp.concatenate([wu, (cost / jnp.outer(zu, zu)).reshape(-1)])
 
         def field(s, y, args):
             w = y[: d.w.shape[1]]
@@ -222,7 +249,7 @@ def riccati_backward(
 
         def sweep(X1, saveat):
             y0 = jnp.concatenate([d.w[-1], X1.reshape(-1)])
-            sol = solve_in_phase(field, y0, 1.0, 0.0, saveat, rtol, atol, max_steps)
+            sol = solve_in_phase(field, y0, 1.0, 0.0, saveat, rtol, atol_i, max_steps)
             assert sol.ys is not None
             return sol.ys[..., d.w.shape[1] :].reshape(*sol.ys.shape[:-1], r, r), sol.result
 
@@ -249,10 +276,12 @@ def riccati_backward(
         _, change, i, ok = carry
         return (change > tol) & (i < max_iterations) & ok
 
+    own = own_units(model, bases[D - 1], R)  # X(1^-) in the walker's own units
+
     def body(carry):
         X1, _, i, _ = carry
         X1n, _, ok = around(X1, diffrax.SaveAt(t1=True))
-        change = jnp.max(jnp.abs(X1n - X1)) / (1.0 + jnp.max(jnp.abs(X1n)))
+        change = jnp.max(jnp.abs(own(X1n - X1))) / (1.0 + jnp.max(jnp.abs(own(X1n))))
         ok = ok & jnp.all(jnp.isfinite(X1n))
         return X1n, change, i + 1, ok
 
@@ -284,6 +313,11 @@ def _hamiltonian_transitions(model, d, P, Q, Rinv, domain, rtol, atol, max_steps
     Qi = reduce(P, Q)
     r = Qi.shape[0]
     nw = d.w.shape[1]
+    # units of (zeta, lambda): zeta's, and the cost's per zeta's
+    wu = phase_units(model)
+    zu = free_units(P, wu)
+    v = jnp.concatenate([zu, cost_unit(model, jnp.linalg.inv(Rinv)) / zu])
+    atol = atol * jnp.concatenate([wu, (v[:, None] / v).reshape(-1)])
 
     def field(s, y, args):
         w = y[:nw]
@@ -393,10 +427,12 @@ def riccati_hamiltonian(
     # A symplectic monodromy has its eigenvalues in pairs (mu, 1/mu): exactly r inside
     # the unit circle, and the subspace they span closes the cycle. Else the monodromy
     # lost its structure to rounding (growth like exp(500) over a domain).
+    own = own_units(model, bases[k], R)
+    defect = own(X_domains[k][-1] - Js[k].T @ X_next @ Js[k] - Qjs[k])
     valid = (
         jnp.all(jnp.isfinite(X))
         & (jnp.sum(jnp.abs(ev) < 1.0) == r)
-        & (residual <= 1e-6 * (1.0 + jnp.max(jnp.abs(X))))
+        & (jnp.max(jnp.abs(defect)) <= 1e-6 * (1.0 + jnp.max(jnp.abs(own(X_domains[k][-1])))))
     )
     # An integration that overflows or runs out of steps (fast modes growing like
     # exp(500)) is the same failure of the method.

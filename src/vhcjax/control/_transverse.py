@@ -146,9 +146,24 @@ def _solve_code(sol):
     )
 
 
+def phase_units(model):
+    """The units of the transverse coordinates $w = (q_{2..n}, \\dot q_{1..n})$: angles
+    1, rates $1/T$ ($T$ = `model.time_scale`)."""
+    n = model.n_dof
+    T = jnp.asarray(model.time_scale, dtype=float)
+    return jnp.concatenate([jnp.ones(n - 1), jnp.ones(n) / T])
+
+
+def free_units(P, units):
+    """The units of the free coordinates $P^T w$ (`P` an orthonormal basis or `None`):
+    the root mean square of the units they combine (a scale for tolerances)."""
+    return units if P is None else jnp.sqrt((jnp.asarray(P) ** 2).T @ units**2)
+
+
 def solve_in_phase(field, y0, t0, t1, saveat, rtol, atol, max_steps):
     """`diffeqsolve` of `field` over the phase from `t0` to `t1` (either way): Tsit5 with
-    a PID controller, failures as diffrax result codes."""
+    a PID controller, failures as diffrax result codes. `atol`: a scalar, or one value
+    per component of `y0` (tolerances in the walker's own units)."""
     return diffrax.diffeqsolve(
         diffrax.ODETerm(field),
         diffrax.Tsit5(),

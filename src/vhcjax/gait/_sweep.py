@@ -33,8 +33,9 @@ class Sweep(eqx.Module):
     - `gaits`: a batched `Gait`, one per slope (failed members carry their code).
     - `tangent`: $dz^*/d\\psi$ at each slope where the gait was found (zero elsewhere), or
       `None` when the sweep was asked not to compute it (`tangents=False`).
-    - `edge_tangent`: $\\max_k |dz^*_k/d\\psi|$ at each found slope next to a missed one
-      (zero elsewhere): a large value there means a fold; `None` (a `Sweep` built by
+    - `edge_tangent`: $\\max_k |dz^*_k/d\\psi|$ at each found slope next to a missed one,
+      in the walker's own units (rates times its time unit; zero elsewhere): a large
+      value there means a fold; `None` (a `Sweep` built by
       hand, e.g. to plot gaits): no fold is reported.
     """
 
@@ -267,7 +268,6 @@ def sweep(model, slopes, family="stable", method="auto", *, anchor_step=ANCHOR_S
     gaits = _gaits_in_units(gaits, model.with_slope(jnp.asarray(psi)))
     if tangent is not None:
         tangent = tangent.at[:, 1:].divide(ts)
-    edge_tangent = edge_tangent / ts
     return Sweep(jnp.asarray(psi), gaits, tangent, edge_tangent)
 
 

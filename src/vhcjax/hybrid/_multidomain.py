@@ -268,7 +268,7 @@ def _domain_grids(model, info, num_points, config, fields=None):
         sol = flow(
             DomainView(model, i),
             info.x_start[i],
-            dur + 1e-12,
+            dur + 1e-12 * model.time_scale,
             config,
             saveat=diffrax.SaveAt(ts=ts),
             event=False,

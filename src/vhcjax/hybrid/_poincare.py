@@ -17,7 +17,13 @@ import optimistix as optx
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..solvers import detach, eigenvalues, implicit_outputs, linearised
-from ._simulate import DEFAULT_CONFIG, check_map_steps, check_section_shape, step_unchecked
+from ._simulate import (
+    DEFAULT_CONFIG,
+    check_map_steps,
+    check_section_shape,
+    section_units,
+    step_unchecked,
+)
 
 
 class MapResult(eqx.Module):
@@ -93,7 +99,8 @@ class FixedPoint(eqx.Module):
     - `x0`: the corresponding post-impact state.
     - `periods`: the k step periods along the orbit.
     - `iterations`: Newton iterations taken.
-    - `residual`: $\\|P^k(z) - z\\|_\\infty$ at the solution.
+    - `residual`: $\\|P^k(z) - z\\|_\\infty$ at the solution, in the walker's own
+      units (angles, and rates times `model.time_scale`).
     - `result`: `successful`, `not_converged`, or the failure of the map at `z` (where
       Newton diverged, `z` is the start).
     """
@@ -138,9 +145,14 @@ def _search(model, z0, k, rtol, atol, max_steps, config):
 
 
 def _newton(model, z0, k, rtol, atol, max_steps, config):
-    def residual_fn(z, _):
+    """Newton on the section coordinates in the walker's own units (`section_units`), so
+    that `rtol`, `atol` and the residual do not depend on its size or gravity."""
+    unit = section_units(model)
+
+    def residual_fn(s, _):
+        z = s * unit
         out = _step_map(model, z, k, config)
-        r = out.z_next - z
+        r = (out.z_next - z) / unit
         # A failed map (fall, missed strike) would otherwise be a silent constant: make
         # Newton see a large residual so it does not declare convergence.
         return jnp.where(out.result == RESULTS.successful, r, 1e3 * jnp.ones_like(r))
@@ -148,10 +160,11 @@ def _newton(model, z0, k, rtol, atol, max_steps, config):
     sol = optx.root_find(
         residual_fn,
         optx.Newton(rtol=rtol, atol=atol),
-        z0,
+        z0 / unit,
         max_steps=max_steps,
         throw=False,
     )
+    sol = eqx.tree_at(lambda s: s.value, sol, sol.value * unit)
     finite = jnp.all(jnp.isfinite(sol.value))
     # Newton diverged (a failed map has no slope, and its step is not finite): the
     # search ends at its start, coded `not_converged`, or with the code of the start's
@@ -159,7 +172,7 @@ def _newton(model, z0, k, rtol, atol, max_steps, config):
     # from it says), never with the code of a non-finite iterate.
     z = jnp.where(finite, sol.value, z0)
     final = _step_map(model, z, k, config)
-    res = jnp.max(jnp.abs(final.z_next - z))
+    res = jnp.max(jnp.abs(final.z_next - z) / unit)
     ok_newton = (sol.result == optx.RESULTS.successful) & finite & jnp.isfinite(res)
     code = RESULTS.where(
         final.result != RESULTS.successful,

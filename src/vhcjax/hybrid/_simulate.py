@@ -28,7 +28,9 @@ class SolverConfig(NamedTuple):
     """Numerical settings of the swing-phase integration (hashable, static).
 
     - `rtol`, `atol`: tolerances of the adaptive step-size controller. They, not the
-      root finder, set the accuracy of the heel-strike time (~1e-11 s at 1e-10).
+      root finder, set the accuracy of the heel-strike time (~1e-11 s at 1e-10 for the
+      thesis walker). `atol` is in the walker's own units (angles, and rates times
+      `model.time_scale`).
     - `max_steps`: ODE steps per walker step.
     - `t_max_factor`: time limit of one step, in units of `model.time_scale`.
     - `solver`: `"tsit5"` or `"dopri8"`.
@@ -78,22 +80,29 @@ def _event(model, gate=False):
     def fall(t, y, args, **kwargs):
         return model.fallen(y[: model.n_dof]) | ~jnp.all(jnp.isfinite(y))
 
-    root_finder = optx.Newton(rtol=1e-13, atol=1e-13)
     return diffrax.Event(
-        cond_fn=(strike, fall), root_finder=root_finder, direction=(True if gate else False, None)
+        cond_fn=(strike, fall),
+        root_finder=event_root_finder(model),
+        direction=(True if gate else False, None),
     )
+
+
+def event_root_finder(model):
+    """Newton on the event time, to 1e-13 of the walker's time unit (`model.time_scale`)."""
+    return optx.Newton(rtol=1e-13, atol=1e-13 * jnp.asarray(model.time_scale, dtype=float))
 
 
 def _units(model, latch=False, n=None):
     """The swing's own units: time $T$ = `model.time_scale`, angles 1, velocities $1/T$
-    (and, with `latch`, the latch of `_latched`: $T L^3$, $L$ the walker's length unit),
+    (and, with `latch`, the latch of `_latched`: $T$, guards and gates being
+    dimensionless),
     so that the integration tolerances do not depend on the walker's size or gravity.
     `n`: the number of coordinates (default `model.n_dof`)."""
     t = jnp.asarray(model.time_scale, dtype=float)
     n = model.n_dof if n is None else n
     parts = [jnp.ones((n,)), jnp.ones((n,)) / t]
     if latch:
-        parts.append((t * model.scales()["length"] ** 3)[None])
+        parts.append(t[None])
     return t, jnp.concatenate(parts)
 
 
@@ -104,6 +113,12 @@ def state_distance(model, x, x_ref):
     x, x_ref = jnp.asarray(x), jnp.asarray(x_ref)
     unit = _units(model, n=x_ref.shape[-1] // 2)[1]
     return jnp.max(jnp.abs(x - x_ref) / unit), jnp.maximum(1.0, jnp.max(jnp.abs(x_ref) / unit))
+
+
+def section_units(model):
+    """The units of the section coordinates (`model.state_to_section` of the state's
+    units `_units`: section coordinates are a selection of state coordinates)."""
+    return jnp.abs(model.state_to_section(_units(model)[1]))
 
 
 def controller(model, config, latch=False):
@@ -217,7 +232,7 @@ def _latched(model, vector_field):
 
     event = diffrax.Event(
         cond_fn=(strike, fall),
-        root_finder=optx.Newton(rtol=1e-13, atol=1e-13),
+        root_finder=event_root_finder(model),
         direction=(False, None),
     )
     return field, event
@@ -420,7 +435,7 @@ def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
             sol = flow(
                 model,
                 x,
-                jnp.where(alive, sr.period, 1e-12) + 1e-12,
+                jnp.where(alive, sr.period, 0.0) + 1e-12 * model.time_scale,
                 config,
                 saveat=diffrax.SaveAt(ts=ts),
                 event=False,

@@ -157,7 +157,10 @@ class WalkerModel(eqx.Module):
     def contact_point(self, q): ...
 
     @abc.abstractmethod
-    def guard(self, q): ...
+    def guard(self, q):
+        """The heel-strike guard: crosses zero downward at heel strike. Dimensionless
+        (an angle, or a height in leg lengths), as is `strike_gate`: the event root
+        finder's tolerance is absolute on it."""
 
     @abc.abstractmethod
     def relabel(self, q, dq) -> tuple[jax.Array, jax.Array]: ...

@@ -6,6 +6,7 @@ from ._design import (
     OBJECTIVES as OBJECTIVES,
     PARAMETERS as PARAMETERS,
     DesignResult as DesignResult,
+    default_bounds as default_bounds,
     design as design,
     parameters_of as parameters_of,
 )

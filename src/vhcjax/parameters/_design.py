@@ -42,7 +42,8 @@ PARAMETERS = {
 }
 #: Units of the parameters (for labels).
 UNITS = {"mass-hip": "kg", "mass-leg": "kg", "a": "m", "b": "m", "gravity": "m/s^2"}
-#: Default bounds of the parameters.
+#: Default bounds of the parameters for the thesis's walker (20 kg, 1 m, 9.81 m/s^2);
+#: `default_bounds` scales them to another walker's own units.
 DEFAULT_BOUNDS = {
     "mass-hip": (1.0, 40.0),
     "mass-leg": (1.0, 20.0),
@@ -50,6 +51,28 @@ DEFAULT_BOUNDS = {
     "b": (0.1, 0.9),
     "gravity": (1.0, 20.0),
 }
+_KINDS = {
+    "mass-hip": "mass",
+    "mass-leg": "mass",
+    "a": "length",
+    "b": "length",
+    "gravity": "acceleration",
+}
+_THESIS_SCALES = {"mass": 20.0, "length": 1.0, "acceleration": 9.81}
+
+
+def default_bounds(model):
+    """`DEFAULT_BOUNDS` in the same proportion to `model`'s own units (`scales`: its total
+    mass, leg length and gravity) as to the thesis's walker's."""
+    sc = model.scales()
+    out = {}
+    for name, (lo, hi) in DEFAULT_BOUNDS.items():
+        kind = _KINDS[name]
+        f = float(sc[kind]) / _THESIS_SCALES[kind]
+        out[name] = (float(f"{lo * f:.12g}"), float(f"{hi * f:.12g}"))
+    return out
+
+
 OBJECTIVES = ("spectral-radius", "flip-slope", "speed")
 #: Halvings of a step that finds no gait or makes the objective worse.
 _HALVINGS = 7
@@ -207,9 +230,11 @@ def design(
       `"gravity"`).
     - `model`: the starting `CompassGait` (its `psi` is the design slope); default
       thesis Table 1 at 3 degrees. It must have a stable gait.
-    - `bounds`: `{name: (lo, hi)}` for some of `vary` (others: `DEFAULT_BOUNDS`).
+    - `bounds`: `{name: (lo, hi)}` for some of `vary` (others: `default_bounds` of
+      `model`).
     - `steps`: iterations at most (accepted steps); `learning_rate`: Adam's, in the
-      scaled coordinates.
+      scaled coordinates (Adam sees the gradient divided by its size at the start, so
+      that its `eps` does not depend on the objective's unit).
     - `method`: the search of the starting gait (`find_gait`, continued from the
       reference gait; default `"auto"`); later gaits are searched by shooting from the
       last one.
@@ -255,7 +280,8 @@ def design(
     extra = sorted(set(bounds or {}) - set(vary))
     if extra:
         raise ValueError(f"bounds given for parameters that are not varied: {extra}")
-    bounds = {k: tuple(map(float, (bounds or {}).get(k, DEFAULT_BOUNDS[k]))) for k in vary}
+    defaults = default_bounds(base)
+    bounds = {k: tuple(map(float, (bounds or {}).get(k, defaults[k]))) for k in vary}
     lo = np.array([bounds[k][0] for k in vary])
     hi = np.array([bounds[k][1] for k in vary])
     if not (np.isfinite(lo).all() and np.isfinite(hi).all() and (0 < lo).all() and (lo < hi).all()):
@@ -288,7 +314,9 @@ def design(
             why = f": {scan.reason[0]}" if scan.reason[0] else ""
         raise ValueError("the objective is not defined at the starting parameters" + why)
     guess = np.asarray(gait.z)
-    scale = max(np.abs(grad * (hi - lo)).max(), 1e-12)
+    # the gradient's size at the start, in the objective's unit: the tolerance `gtol` and
+    # Adam's `eps` are relative to it (a gradient of exactly zero: stationary at once)
+    scale = float(np.abs(grad * (hi - lo)).max()) or 1.0
 
     def entry(k, x, v, step):
         params = parameters_of(with_parameters(base, vary, x))
@@ -346,7 +374,7 @@ def design(
         if not sampling:
             # 1. Adam (optax): its step, halved back toward the last iterate until it
             # finds a gait no worse than the last
-            upd, state = opt.update(jnp.asarray(sense * grad * (hi - lo)), state)
+            upd, state = opt.update(jnp.asarray(sense * grad * (hi - lo) / scale), state)
             u_new = np.clip(u + np.asarray(upd), 0.0, 1.0)
             step = line_search(lambda t: u + t * (u_new - u), None, _HALVINGS)
             if step is None:  # a kink (or momentum uphill): gradient sampling from here on
@@ -374,14 +402,15 @@ def design(
                 # stay on its branch), halved until a trial lies within the radius: a
                 # failed search leaves gradients there for the next round; the decrease
                 # asked for is the one of the clipped (actual) step
-                t0 = min(1.0, learning_rate / float(np.linalg.norm(d)))
+                dn = d / scale  # unit-free, as Adam's steps
+                t0 = min(1.0, learning_rate / float(np.linalg.norm(dn)))
                 n = max(
                     _SAMPLED_HALVINGS,
-                    math.ceil(math.log2(t0 * float(np.linalg.norm(d)) / radius)) + 1,
+                    math.ceil(math.log2(t0 * float(np.linalg.norm(dn)) / radius)) + 1,
                 )
                 step = line_search(
-                    lambda t: np.clip(u - t * d, 0.0, 1.0),
-                    lambda w: _ARMIJO * float(d @ (u - w)),
+                    lambda t: np.clip(u - t * dn, 0.0, 1.0),
+                    lambda w: _ARMIJO * float(dn @ (u - w)) * scale,
                     n,
                     t0,
                 )

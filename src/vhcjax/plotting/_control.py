@@ -36,7 +36,7 @@ def plot_stabilization(
     - `s`, `K`: phase grid and gains `(N+1, m, r)` (compass gait: r = 3), or
       `(num_domains, N+1, m, r)` for a multi-domain model (drawn domain after domain).
     - `closed_errors`, `passive_errors`: max-norm distance to the gait on the post-impact
-      section after each step.
+      section after each step, in the walker's own units (rates times $\\sqrt{l/g}$).
     - `basin`: `None` or a dict with `z_star`, `offsets_x`, `offsets_y` and boolean grids
       `passive`, `closed` (converged), over section coordinates $(q_1, \\dot q_1)$.
     - `coordinates`, `torques`: names of the transverse coordinates (e.g. "delta dq2")
@@ -91,7 +91,7 @@ def plot_stabilization(
     ax.semilogy(k, np.maximum(closed_errors, 1e-16), "o-", ms=3, label="with feedback")
     ax.semilogy(k, np.maximum(passive_errors, 1e-16), "s-", ms=3, label="passive")
     ax.set_xlabel("step")
-    ax.set_ylabel(r"$\|z_k - z_\star\|_\infty$ after impact (rad, rad/s)")
+    ax.set_ylabel(r"$\|z_k - z_\star\|_\infty$ after impact (rad; rad/s $\times\sqrt{l/g}$)")
     ax.set_title("Recovery from the perturbed gait")
     ax.legend(fontsize=8)
 

@@ -57,11 +57,12 @@ def swing_from(model, x, t0, t_max, config, vector_field=None):
     """Rest of a swing from state `x` at time `t0` to heel strike (strike gate respected:
     if it is already open at `x`, look for the strike at once)."""
     n = model.n_dof
+    tiny = 1e-9 * model.time_scale  # the end of a solve whose answer is not used
     open0 = model.strike_gate(x[:n]) > 0
     sol1 = flow(
         model,
         x,
-        jnp.where(open0, t0 + 1e-9, t_max),
+        jnp.where(open0, t0 + tiny, t_max),
         config,
         gate=True,
         t0=t0,
@@ -75,7 +76,7 @@ def swing_from(model, x, t0, t_max, config, vector_field=None):
     sol2 = flow(
         model,
         x_mid,
-        jnp.where(opened, t_max, t_mid + 1e-9),
+        jnp.where(opened, t_max, t_mid + tiny),
         config,
         t0=t_mid,
         vector_field=vector_field,
@@ -102,15 +103,16 @@ def _pushed_step(model, x0, t_push, kick, config, alive):
     swing to heel strike, impact. The kick must end before the heel strike."""
     n = model.n_dof
     t_max = config.t_max_factor * model.time_scale
-    t_s = jnp.maximum(t_push, 1e-12)
+    tiny = 1e-12 * model.time_scale  # a solve of (almost) zero length
+    t_s = jnp.maximum(t_push, tiny)
     alive = jnp.asarray(alive)
-    sol0 = flow(model, x0, jnp.where(alive, t_s, 1e-12), config, event=False)
+    sol0 = flow(model, x0, jnp.where(alive, t_s, tiny), config, event=False)
     assert sol0.ys is not None  # flow saves at t1
     xs = sol0.ys[-1]
     x_k, t_k = kick(xs, t_s)
     bad = model.fallen(xs[:n]) | model.fallen(x_k[:n]) | ~jnp.all(jnp.isfinite(x_k))
     x_minus, t_end, code = swing_from(
-        model, x_k, jnp.where(alive, t_k, 1e-12), jnp.where(alive, t_max, 2e-12), config
+        model, x_k, jnp.where(alive, t_k, tiny), jnp.where(alive, t_max, 2 * tiny), config
     )
     code = RESULTS.where(bad, RESULTS.fell, code)
     return finish_step(model, x_minus, t_end, code, x0)
@@ -174,7 +176,7 @@ def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-
     """$\\partial\\zeta^+/\\partial P$ (shape `(len(phases), 2n-1, 2)`): the transverse
     coordinates after the next impact per unit hip impulse at each phase, from the
     transverse linearization (thesis 6.21, 6.30, 6.38) plus the input term
-    $L(t_s) B(t_s)$.
+    $L(t_s) B(t_s)$. `atol` in the walker's own units (`joint_state_units`).
     """
     from .. import stability as tr
 
@@ -202,7 +204,9 @@ def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-
         y0=u0,
         args=(model, E0),
         saveat=diffrax.SaveAt(ts=ts),
-        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        stepsize_controller=diffrax.PIDController(
+            rtol=rtol, atol=atol * tr.joint_state_units(model)
+        ),
         max_steps=4096,
         throw=False,
     )

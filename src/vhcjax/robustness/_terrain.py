@@ -30,8 +30,9 @@ class FloorStepCompassGait(CompassGait):
     """Compass gait whose swing foot strikes a floor offset by `floor_offset` (m,
     vertical, positive = step up) from the slope through the stance foot.
 
-    The guard is the foot height above that floor along the slope normal,
-    $l\\,H(q) - h\\cos\\psi$ (thesis 3.31 shifted), crossing zero downward after the
+    The guard is the foot height above that floor along the slope normal in leg
+    lengths, $H(q) - h\\cos\\psi / l$ (thesis 3.31 shifted; dimensionless, like every
+    guard, so the event tolerance is unit-free), crossing zero downward after the
     strike gate has opened; at `floor_offset = 0` the heel strike is the nominal one. A
     step up higher than the swing foot's clearance is never reached (the foot stubs
     the raised floor): the walker then falls, which is what the simulation reports.
@@ -40,7 +41,7 @@ class FloorStepCompassGait(CompassGait):
     floor_offset: float | jax.Array = 0.0
 
     def guard(self, q):
-        return self.l * self.switching_surface(q) - self.floor_offset * jnp.cos(self.psi)
+        return self.switching_surface(q) - self.floor_offset * jnp.cos(self.psi) / self.l
 
 
 def floor_step_model(model, h):

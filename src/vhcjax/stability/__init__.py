@@ -42,6 +42,7 @@ from ._transverse import (
     flow_projection as flow_projection,
     g_h as g_h,
     guard_normal as guard_normal,
+    joint_state_units as joint_state_units,
     joint_vector_field as joint_vector_field,
     m_vector as m_vector,
     orbit_state as orbit_state,

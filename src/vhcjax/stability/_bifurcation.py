@@ -22,7 +22,8 @@ class BifurcationDiagram(eqx.Module):
       zero after a fall).
     - `fell` (B,): the walker did not complete all steps.
     - `result` (B,): first failure code per slope.
-    - `period_pattern` (B,): how often the recorded step periods repeat (to 1e-5 s):
+    - `period_pattern` (B,): how often the recorded step periods repeat (to `period_tol`
+      of the walker's time unit):
       1, 2, 4, ... steps per repetition, 0 if aperiodic (chaotic or not settled), -1 where it fell.
     """
 
@@ -49,7 +50,8 @@ def bifurcation_diagram(
     model=None,
     num_transient=300,
     num_record=64,
-    perturbation=1e-4,
+    perturbation=3e-5,
+    period_tol=3e-5,
     config=FAST_CONFIG,
     chunk=None,
     mesh=None,
@@ -58,8 +60,11 @@ def bifurcation_diagram(
     `num_transient + num_record` steps (batched with `vmap`) and keep the step periods
     of the last `num_record`.
 
-    The start is the gait plus `perturbation` on $\\dot q_2$, so that unstable period-1
-    gaits (past the flip) leave towards the attractor. Default tolerance: `FAST_CONFIG`
+    The start is the gait plus `perturbation` on $\\dot q_2$, in the walker's rate unit
+    $1/T$ ($T$ = `model.time_scale`; the default is about 1e-4 rad/s for the thesis
+    walker), so that unstable period-1 gaits (past the flip) leave towards the attractor.
+    The period pattern compares step periods to `period_tol` $T$ (about 1e-5 s for the
+    thesis walker): both are unit-free, so a rescaled walker gives the same diagram. Default tolerance: `FAST_CONFIG`
     (rtol = atol = 1e-8). `chunk`: largest batch of one call (default: 256 when the
     chunks run one per CPU core at a time, else the whole batch). The chunks are padded
     to a power of two (nearby sizes share one compiled program) and split over the devices
@@ -81,7 +86,8 @@ def bifurcation_diagram(
     x0s = np.stack(
         [np.asarray(model.with_slope(p).section_to_state(jnp.asarray(z))) for p, z in zip(psis, zs)]
     )
-    x0s[:, -1] += perturbation
+    time_unit = float(model.time_scale)
+    x0s[:, -1] += perturbation / time_unit
     steps = num_transient + num_record
     p, r = padded_map(
         lambda ps, xs: _long_runs(model, ps, xs, steps, num_record, config),
@@ -94,7 +100,8 @@ def bifurcation_diagram(
     )
     periods, codes = np.asarray(p), np.asarray(result_codes(r))
     fell = codes != int(result_codes(RESULTS.successful))
-    nd = np.array([-1 if f else detect_period(pp) for pp, f in zip(periods, fell)])
+    tol = period_tol * time_unit
+    nd = np.array([-1 if f else detect_period(pp, tol) for pp, f in zip(periods, fell)])
     return BifurcationDiagram(psis, periods, fell, codes, nd)
 
 

@@ -8,6 +8,7 @@ import optimistix as optx
 
 from .._programs import stored_jit
 from ..hybrid import DEFAULT_CONFIG, ode_solver, solve_to_event
+from ..hybrid._simulate import _units
 from ._multipliers import _sort
 
 
@@ -45,6 +46,7 @@ def _flow_event(model, x0, event, config):
         rtol=config.rtol,
         atol=config.atol,
         max_steps=config.max_steps,
+        units=_units(model),
     )
     ok = sol.result == diffrax.RESULTS.event_occurred
     return sol.ys[-1], sol.ts[-1], ok

@@ -109,8 +109,8 @@ def _transverse_checks(model, x0, sr, tl, pm, config):
     """`transverse_result`, `disagreement`, `condition` (see `GaitMultipliers`)."""
     condition = tl.condition
     ill = (condition > MAX_CONDITION) | (tl.transversality < 1e-8)
-    scale = jnp.maximum(jnp.max(jnp.abs(sr.x_minus)), 1.0)
-    orbit_off = (jnp.max(jnp.abs(tl.x_minus - sr.x_minus)) > AGREEMENT_RTOL * scale) | (
+    moved, scale = state_distance(model, tl.x_minus, sr.x_minus)  # own units
+    orbit_off = (moved > AGREEMENT_RTOL * scale) | (
         jnp.abs(tl.period - sr.period) > AGREEMENT_RTOL * jnp.abs(sr.period)
     )
     disagreement = _spectral_distance(tl.multipliers, pm)

@@ -11,6 +11,7 @@ import numpy as np
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, fixed_point, step_map
 from ..hybrid._poincare import _jacobian as jacobian  # forward mode, as its callers need
+from ..hybrid._simulate import section_units
 from ..models import CompassGait  # the default model (thesis Table 1) where none is given
 from ._multipliers import _sort
 
@@ -107,8 +108,10 @@ def period2_branch(model, pd, psis, config=DEFAULT_CONFIG, amplitudes=(3e-3, 1e-
         return None
     J = jacobian(model.with_slope(pd.psi), jnp.asarray(pd.z), 1, config)
     ev, V = np.linalg.eig(np.asarray(J))
-    v = np.real(V[:, np.argmin(np.abs(ev + 1))])
-    v = v / np.linalg.norm(v)
+    # the flip eigenvector, normalised in the walker's own units (rates times T)
+    unit = np.asarray(section_units(model))
+    v = np.real(V[:, np.argmin(np.abs(ev + 1))]) / unit
+    v = unit * v / np.linalg.norm(v)
     out_psi, out_z, out_T, out_mx = [], [], [], []
     zs = []
     for i, p in enumerate(psis):
@@ -127,7 +130,7 @@ def period2_branch(model, pd, psis, config=DEFAULT_CONFIG, amplitudes=(3e-3, 1e-
             if fp.result != RESULTS.successful:
                 continue
             z1 = np.asarray(step_map(m, fp.z, 1, config).z_next)
-            if np.max(np.abs(z1 - np.asarray(fp.z))) > 1e-6:
+            if np.max(np.abs(z1 - np.asarray(fp.z)) / unit) > 1e-6:
                 found = fp
                 break
         if found is None:

@@ -97,9 +97,12 @@ def system_matrix(model, E0, theta, dtheta, phi, dphi):
         jnp.zeros((), phi.dtype), dtheta, zeros, zeros
     )
     # (6.18): derivative along n = (-ddtheta, dtheta) in the (theta, dtheta) plane over
-    # that of I, whose gradient on the orbit is (-2 ddtheta, 2 dtheta) (6.19).
-    d_n = -d_s * ddtheta + d_dth * dtheta
-    d_I = d_n / (2.0 * (dtheta**2 + ddtheta**2))
+    # that of I, whose gradient on the orbit is (-2 ddtheta, 2 dtheta) (6.19); the normal
+    # taken in the walker's own units (theta, T dtheta), which balances the two terms
+    # (any direction across the orbit gives the same derivative: g, h vanish along it).
+    T = jnp.asarray(model.time_scale, dtype=phi.dtype)
+    a, b = ddtheta * T**2, dtheta * T
+    d_I = (-d_s * a * T**2 + d_dth * b * T) / (2.0 * (a**2 + b**2))
     gI, hI = d_I[0], d_I[1:]
     gy, hy = d_y[0], d_y[1:]
     gdy, hdy = d_dy[0], d_dy[1:]
@@ -190,9 +193,10 @@ class TransverseLinearization(eqx.Module):
       $\\delta x^+ \\mapsto \\zeta^+$).
     - `x_minus`: $x_\\star^-$ at the end of the integrated orbit; `period`: the time
       $T$ at which $\\theta_\\star$ reaches $\\theta^-$.
-    - `condition`: the larger condition number of $[L; m^T]$ at $x^-$ and $x^+$ (the
-      change to transverse coordinates; large where they degenerate; 1/eps where singular).
-    - `transversality`: the smaller $|m^T n| / (|m| |n|)$ at the two impact surfaces
+    - `condition`: the larger condition number of $[L; m^T]$ at $x^-$ and $x^+$ in the
+      walker's own units (the change to transverse coordinates; large where they
+      degenerate; 1/eps where singular).
+    - `transversality`: the smaller $|m^T n| / (|m| |n|)$ (own units) at the two impact surfaces
       (near 0 where the flow is tangent to them and the projections (6.35), (6.36) blow
       up).
     - `result`: `successful` or a failure code (`max_steps_reached`, `no_impact`,
@@ -215,6 +219,29 @@ class TransverseLinearization(eqx.Module):
 
 def _cosine(m, normal):
     return jnp.abs(jnp.dot(m, normal)) / (jnp.linalg.norm(m) * jnp.linalg.norm(normal))
+
+
+def _own_units(model):
+    """$T$ (`model.time_scale`), the units of the state (angles 1, rates $1/T$) and of
+    the transverse coordinates ($I$: $1/T^2$, $y$: 1, $\\dot y$: $1/T$), so that the
+    conditioning, transversality and ODE tolerances do not depend on the walker's size
+    or gravity."""
+    n = model.n_dof
+    T = jnp.asarray(model.time_scale, dtype=float)
+    state = jnp.concatenate([jnp.ones(n), jnp.ones(n) / T])
+    perp = jnp.concatenate([(1 / T**2)[None], jnp.ones(n - 1), jnp.ones(n - 1) / T])
+    return T, state, perp
+
+
+def joint_state_units(model):
+    """The units of the state of `joint_vector_field`, $(\\theta, \\dot\\theta, \\phi,
+    \\phi', \\Phi)$: angles 1, $\\dot\\theta$ $1/T$, $\\phi'$ 1, and $\\Phi_{ij}$ the
+    ratio of the units of transverse coordinates $i$ and $j$ (the absolute tolerance of
+    its integration, times `atol`)."""
+    T, _, perp = _own_units(model)
+    k = model.n_dof - 1
+    head = jnp.concatenate([jnp.stack([1.0, 1 / T]), jnp.ones(2 * k)])
+    return jnp.concatenate([head, (perp[:, None] / perp).reshape(-1)])
 
 
 def split_orbit_state(model, u):
@@ -256,7 +283,11 @@ def transverse_linearization(
     - `x_minus`: pre-impact state; only $\\theta^- = $ `x_minus[0]` is used (the end of
       the orbit); the rest is recomputed from the integration.
     - `period`: the step period, used only to bound the integration (to 2x).
-    - `rtol`, `atol`, `max_steps`: settings of the joint ODE (Tsit5).
+    - `rtol`, `atol`, `max_steps`: settings of the joint ODE (Tsit5); `atol` in the
+      walker's own units (angles, and rates times `model.time_scale`).
+
+    The condition number, the transversality and the lift off the transverse coordinates
+    are computed in the walker's own units too.
 
     **Returns:** a `TransverseLinearization`.
 
@@ -278,10 +309,14 @@ def transverse_linearization(
         [jnp.stack([theta0, dtheta0]), phi0, dphi0, jnp.eye(r, dtype=x_plus.dtype).reshape(-1)]
     )
 
+    T_unit, x_unit, perp_unit = _own_units(model)
+
     def cond(t, y, args, **kwargs):
         return y[0] - theta_end
 
-    event = diffrax.Event(cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13), direction=False)
+    event = diffrax.Event(
+        cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13 * T_unit), direction=False
+    )
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(joint_vector_field),
         diffrax.Tsit5(),
@@ -290,7 +325,7 @@ def transverse_linearization(
         dt0=None,
         y0=u0,
         args=(model, E0),
-        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol * joint_state_units(model)),
         event=event,
         max_steps=max_steps,
         throw=False,
@@ -323,8 +358,13 @@ def transverse_linearization(
     m_minus = m_vector(model, E0, thT, dthT, phT, dphT)
     L_plus = L_matrix(model, E0, theta0, dtheta0, phi0, dphi0)
     m_plus = m_vector(model, E0, theta0, dtheta0, phi0, dphi0)
-    Lm = jnp.concatenate([L_minus, m_minus[None]], axis=0)
-    lift = jnp.linalg.solve(Lm, jnp.eye(2 * n, r, dtype=Lm.dtype))  # [L; m^T]^-1 [I; 0]
+
+    def own(L, m):  # [L; m^T] in own units: x = D_x x', x_perp = D_perp x_perp'
+        return jnp.concatenate([L * x_unit / perp_unit[:, None], (T_unit * m / x_unit)[None]])
+
+    Lm = own(L_minus, m_minus)
+    # [L; m^T]^-1 [I; 0] (any complement of m: the projection below removes it)
+    lift = x_unit[:, None] * jnp.linalg.solve(Lm, jnp.eye(2 * n, r, dtype=Lm.dtype)) / perp_unit
     P_minus = flow_projection(m_minus, n_minus) @ lift
     P_plus = L_plus @ flow_projection(m_plus, n_plus)
     dF_TS = P_plus @ dF @ P_minus
@@ -333,11 +373,14 @@ def transverse_linearization(
     ev = ev[jnp.argsort(-jnp.abs(ev))]
     finite = jnp.all(jnp.isfinite(Xi))
     code = RESULTS.where((code == RESULTS.successful) & ~finite, RESULTS.nonfinite, code)
-    Lp = jnp.concatenate([L_plus, m_plus[None]], axis=0)
+    Lp = own(L_plus, m_plus)
     condition = jnp.maximum(jnp.linalg.cond(Lm), jnp.linalg.cond(Lp))
     # numerically singular: 1/eps (finite, so that no result holds inf)
     condition = jnp.where(jnp.isfinite(condition), condition, 1 / jnp.finfo(Lm.dtype).eps)
-    transversality = jnp.minimum(_cosine(m_minus, n_minus), _cosine(m_plus, n_plus))
+    transversality = jnp.minimum(
+        _cosine(T_unit * m_minus / x_unit, n_minus * x_unit),
+        _cosine(T_unit * m_plus / x_unit, n_plus * x_unit),
+    )
     transversality = jnp.where(jnp.isfinite(transversality), transversality, 0.0)
     return TransverseLinearization(
         Xi, ev, Phi_T, dF, dF_TS, P_minus, P_plus, xm, T, condition, transversality, code
