@@ -109,7 +109,7 @@ def run_push(args):
         zad = np.einsum("ij,sjk->sik", np.asarray(lin.P_plus), np.asarray(D))
         out["transverse_dzeta_dP"] = Z
         out["max_abs_difference_autodiff_vs_transverse"] = float(np.max(np.abs(zad - Z)))
-    bound = push_bound(model, args.duration)
+    bound = float(push_bound(model, args.duration))
     if args.max is None:
         args.max = float(f"{bound:.12g}")  # 20, not 20.000000000000004
     elif args.max > 5e4 * bound:  # 1e6 N s for the thesis's walker

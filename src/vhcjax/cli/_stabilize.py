@@ -139,9 +139,7 @@ def _weights(args):
         raise CLIError(f"--q: each nonzero weight must be in [{lo:g}, {hi:g}], got {shown(text)}")
     text = args.q_jump if args.q_jump is not None else ",".join(f"{v!r}" for v in q)
     q_jump = _numbers("--q-jump", text, len(coords), coords)
-    if min(q_jump) < 0 or (max(q_jump) > 0 and min(v for v in q_jump if v > 0) < lo):
-        raise CLIError(f"--q-jump: each weight must be 0 or in [{lo:g}, {hi:g}], got {shown(text)}")
-    if max(q_jump) > hi:
+    if any(v != 0 and not lo <= v <= hi for v in q_jump):
         raise CLIError(f"--q-jump: each weight must be 0 or in [{lo:g}, {hi:g}], got {shown(text)}")
     text = args.r if args.r is not None else "1"
     n = 1 if "," not in text else len(torques)

@@ -23,7 +23,7 @@ from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, SolverConfig, check_section_shape, flow
 from ..hybrid._simulate import section_units
-from ..robustness import direction, finish_step, impulse_velocity_jump, swing_from
+from ..robustness import direction, finish_step, impulse_velocity_jump, push_bound, swing_from
 from ._actuated import (
     closed_loop_field,
     closed_loop_step,
@@ -368,13 +368,6 @@ def _push_survives(model, feedback, x_star, t_push, impulse, num_steps, tol, con
     return (sr.result == RESULTS.successful) & (sim.result == RESULTS.successful) & (err < tol)
 
 
-def _default_push(model):
-    """`vhcjax.push_bound(model)` (traceable): 20 N s for the thesis's 20 kg walker, in
-    proportion to the walker's impulse unit $M\\sqrt{gL}$."""
-    sc = model.scales()
-    return sc["mass"] * jnp.sqrt(sc["acceleration"] * sc["length"] / 9.81)
-
-
 def closed_loop_max_push(
     model,
     feedback,
@@ -422,7 +415,7 @@ def closed_loop_max_push(
             0,
             iterations,
             body,
-            (jnp.zeros(()), jnp.asarray(_default_push(model) if p_max is None else p_max, float)),
+            (jnp.zeros(()), jnp.asarray(push_bound(model) if p_max is None else p_max, float)),
         )
         return jnp.where(ok(jnp.zeros(())), lo, 0.0)
 

@@ -30,7 +30,7 @@ import numpy as np
 from .._programs import stored_jit
 from .._results import RESULTS, result_codes, results_from_codes
 from ..hybrid import SolverConfig, check_state_shape, multidomain_step
-from ..hybrid._simulate import state_distance
+from ..hybrid._simulate import _units, state_distance
 from ..stability import GAIT_TOL, guard_normal
 from ._actuated import actuated_vector_field, is_multidomain, num_inputs
 
@@ -149,9 +149,7 @@ def _solve_code(sol):
 def phase_units(model):
     """The units of the transverse coordinates $w = (q_{2..n}, \\dot q_{1..n})$: angles
     1, rates $1/T$ ($T$ = `model.time_scale`)."""
-    n = model.n_dof
-    T = jnp.asarray(model.time_scale, dtype=float)
-    return jnp.concatenate([jnp.ones(n - 1), jnp.ones(n) / T])
+    return _units(model)[1][1:]
 
 
 def free_units(P, units):

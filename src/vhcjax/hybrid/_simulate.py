@@ -89,7 +89,8 @@ def _event(model, gate=False):
 
 def event_root_finder(model):
     """Newton on the event time, to 1e-13 of the walker's time unit (`model.time_scale`)."""
-    return optx.Newton(rtol=1e-13, atol=1e-13 * jnp.asarray(model.time_scale, dtype=float))
+    atol = 1e-13 * jnp.asarray(model.time_scale, dtype=float)  # an array (traced models)
+    return optx.Newton(rtol=1e-13, atol=atol)  # pyright: ignore[reportArgumentType]
 
 
 def _units(model, latch=False, n=None):

@@ -22,8 +22,6 @@ independent ways that the tests compare:
    \\Phi(t_s)^{-1} L(t_s) B(t_s) P$.
 """
 
-import math
-
 import diffrax
 import equinox as eqx
 import jax
@@ -304,13 +302,11 @@ def push_bound(model, duration=0.0):
     """The default upper bound of `max_push`: 20 N s (an impulse, `duration = 0`) or
     196.2 N (a pulse force) for the thesis's walker (20 kg, 1 m, 9.81 m/s^2), in the same
     proportion to `model`'s own impulse unit $M\\sqrt{gL}$ or force unit $Mg$ (`scales`),
-    so that a rescaled walker is searched over the rescaled range."""
-    s = {k: float(v) for k, v in model.scales().items()}
+    so that a rescaled walker is searched over the rescaled range. Traceable."""
+    s = model.scales()
     if duration == 0:
-        return (
-            20.0 * s["mass"] * math.sqrt(s["acceleration"] * s["length"]) / (20 * math.sqrt(9.81))
-        )
-    return 20.0 * 9.81 * s["mass"] * s["acceleration"] / (20 * 9.81)
+        return s["mass"] * jnp.sqrt(s["acceleration"] * s["length"] / 9.81)
+    return s["mass"] * s["acceleration"]
 
 
 def max_push(

@@ -31,11 +31,11 @@ import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-import optimistix as optx
 
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..gait import phi_second_derivative, theta_dynamics_coefficients
+from ..hybrid._simulate import _units, event_root_finder
 
 
 # ---- transverse dynamics (6.6)-(6.13) ---------------------------------------------------
@@ -227,8 +227,7 @@ def _own_units(model):
     conditioning, transversality and ODE tolerances do not depend on the walker's size
     or gravity."""
     n = model.n_dof
-    T = jnp.asarray(model.time_scale, dtype=float)
-    state = jnp.concatenate([jnp.ones(n), jnp.ones(n) / T])
+    T, state = _units(model)
     perp = jnp.concatenate([(1 / T**2)[None], jnp.ones(n - 1), jnp.ones(n - 1) / T])
     return T, state, perp
 
@@ -314,9 +313,7 @@ def transverse_linearization(
     def cond(t, y, args, **kwargs):
         return y[0] - theta_end
 
-    event = diffrax.Event(
-        cond, root_finder=optx.Newton(rtol=1e-13, atol=1e-13 * T_unit), direction=False
-    )
+    event = diffrax.Event(cond, root_finder=event_root_finder(model), direction=False)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(joint_vector_field),
         diffrax.Tsit5(),
