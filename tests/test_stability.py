@@ -356,7 +356,9 @@ def test_library_inputs_refused_with_the_shape_or_range_expected():
         with pytest.raises(ValueError, match="finite positive"):
             vhcjax.atlas(mu, beta)
     with pytest.raises(ValueError, match="outside the bounds"):
-        vhcjax.design("speed", ["mass-hip"], model=CompassGait(mH=100.0))
+        # default bounds in proportion to the walker's mass: a hip of 0.5 kg on 10.5 kg
+        # is below the thesis walker's 1 kg on 20 kg
+        vhcjax.design("speed", ["mass-hip"], model=CompassGait(mH=0.5))
     with pytest.raises(ValueError, match="non-positive"):
         vhcjax.design("speed", ["mass-hip"], model=CompassGait(mH=-1.0))
 

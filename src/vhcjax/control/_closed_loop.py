@@ -133,7 +133,8 @@ class Stabilization(eqx.Module):
     - `riccati_check`: the `RiccatiSolution` by the Hamiltonian monodromy (its `result`
       says when that method does not hold, e.g. `riccati_ill_conditioned`).
     - `riccati_agreement`: $\\max|X_1 - X_2| / \\max|X_1|$ over the phase grid ($X$ in
-      the walker's own units, `own_units`); NaN when
+      the walker's own units: entries times the units of their two coordinates over
+      the cost's unit); NaN when
       the check did not succeed.
     - `feedback`: the `TransverseFeedback` law (`HybridTransverseFeedback`: one per
       domain).

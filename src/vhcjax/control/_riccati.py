@@ -215,10 +215,11 @@ def riccati_backward(
     - `Q`, `R`, `Q_jump`: weights (matrices or diagonals, on all $2n-1$ coordinates);
       default identities, and `Q_jump = Q`.
     - `tol`: stop when $\\max|\\Delta X(1^-)| \\le$ `tol` $(1 + \\max|X(1^-)|)$, $X$ in
-      the walker's own units (`own_units`).
+      the walker's own units (entries times the units of their two coordinates over
+      the cost's unit).
     - `max_iterations`: sweeps at most (else `not_converged`).
     - `rtol`, `atol`, `max_steps`: settings of the backward integration (Tsit5), `atol`
-      in the walker's own units (`own_units`).
+      in the walker's own units.
 
     **Returns:** a `RiccatiSolution`.
     """

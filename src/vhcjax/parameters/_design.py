@@ -230,8 +230,8 @@ def design(
       `"gravity"`).
     - `model`: the starting `CompassGait` (its `psi` is the design slope); default
       thesis Table 1 at 3 degrees. It must have a stable gait.
-    - `bounds`: `{name: (lo, hi)}` for some of `vary` (others: `default_bounds` of
-      `model`).
+    - `bounds`: `{name: (lo, hi)}` for some of `vary` (others: the thesis walker's
+      default bounds, in the same proportion to `model`'s mass, length and gravity).
     - `steps`: iterations at most (accepted steps); `learning_rate`: Adam's, in the
       scaled coordinates (Adam sees the gradient divided by its size at the start, so
       that its `eps` does not depend on the objective's unit).

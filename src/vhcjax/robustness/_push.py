@@ -174,7 +174,7 @@ def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-
     """$\\partial\\zeta^+/\\partial P$ (shape `(len(phases), 2n-1, 2)`): the transverse
     coordinates after the next impact per unit hip impulse at each phase, from the
     transverse linearization (thesis 6.21, 6.30, 6.38) plus the input term
-    $L(t_s) B(t_s)$. `atol` in the walker's own units (`joint_state_units`).
+    $L(t_s) B(t_s)$. `atol` in the walker's own units.
     """
     from .. import stability as tr
 
