@@ -19,6 +19,7 @@ import io
 import json
 import math
 
+import numpy as np
 import pytest
 
 from vhcjax.cli import main
@@ -254,7 +255,7 @@ UNITS = {
 }
 
 #: Fields not compared: about the run rather than the walker (the tolerance settings in
-#: words; the LQR weights `stabilize` was given, inputs the test scales itself), or
+#: words; the LQR weights, which the test checks against `default_weights`), or
 #: maxima over entries of different units, which no single unit scales.
 NOT_COMPARED = {
     "bifurcation": {"tolerance"},
@@ -286,26 +287,6 @@ def _model_flags(k, leg_mass_only=False):
 def _time_unit(k):
     kl, _, kg = k
     return math.sqrt(kl / kg)
-
-
-def _stabilize_weights(k):
-    """--q, --q-jump and --r for the scaled walker: the cost of the thesis walker's (all
-    1) in the scaled units, times a constant that keeps every weight within the command's
-    range (per second: --q, --r; per heel strike: --q-jump)."""
-    kl, km, kg = k
-    t = _time_unit(k)
-    torque = km * kg * kl
-    c = {1.0: 1.0, 1e-3: 1e3, 1e3: 1e-3}[kl]
-    q = [c / t, c * t, c * t]
-    q_jump = [c, c * t**2, c * t**2]
-    return [
-        "--q",
-        ",".join(repr(v) for v in q),
-        "--q-jump",
-        ",".join(repr(v) for v in q_jump),
-        "--r",
-        repr(c / (torque**2 * t)),
-    ]
 
 
 def _argv(command, k, tmp):
@@ -352,7 +333,7 @@ def _argv(command, k, tmp):
             "10",
             *walker,
         ],
-        "stabilize": ["stabilize", "--steps", "5", *_stabilize_weights(k), *walker],
+        "stabilize": ["stabilize", "--steps", "5", *walker],  # default weights: scaled
         "design-rho": [
             "design",
             "--objective",
@@ -535,3 +516,11 @@ def test_scaling(command, walker, tmp_path_factory):
     tol_one, tol_dimensional = TOL[command]
     assert worst["one"][0] <= tol_one, worst
     assert worst["dimensional"][0] <= tol_dimensional, worst
+    if command == "stabilize":  # the default weights: the thesis walker's 1, rescaled
+        kl, km, kg = WALKERS[walker]
+        t, torque = _time_unit(WALKERS[walker]), km * kg * kl
+        w = rec["weights"]
+        np.testing.assert_allclose(w["q"], [1 / t, t, t], rtol=1e-12)
+        np.testing.assert_allclose(w["q_jump"], [1, t**2, t**2], rtol=1e-12)
+        np.testing.assert_allclose(w["r"], 1 / (torque**2 * t), rtol=1e-12)
+        assert ref["weights"] == {"q": [1.0, 1.0, 1.0], "r": 1.0, "q_jump": [1.0, 1.0, 1.0]}

@@ -62,3 +62,32 @@ def test_a_scaled_walker_survives_the_scaled_pushes():
     assert r0.threshold.bracketed.all() and r1.threshold.bracketed.all()
     np.testing.assert_allclose(r1.threshold.lo, r0.threshold.lo * K_IMPULSE, rtol=1e-12)
     np.testing.assert_allclose(r1.threshold.hi, r0.threshold.hi * K_IMPULSE, rtol=1e-12)
+
+
+def _unit(m):
+    return np.asarray(vj.hybrid._simulate.section_units(m))
+
+
+def test_a_scaled_walker_gets_the_scaled_basin_grid():
+    """`basin_slice`'s default grid (0.1 rad, 0.4 rad/s for the thesis walker) is the
+    same grid in a rescaled walker's own units, and classifies alike."""
+    (m0, g0), (m1, g1) = _gaits()
+    b0, b1 = (vj.basin_slice(m, g.z, shape=(3, 5), num_steps=10) for m, g in ((m0, g0), (m1, g1)))
+    assert b0.offsets_y[-1] == 0.4 and b0.offsets_x[-1] == 0.1
+    np.testing.assert_allclose(b1.offsets_x, b0.offsets_x, rtol=1e-15)
+    np.testing.assert_allclose(b1.offsets_y, b0.offsets_y / K_TIME, rtol=1e-12)
+    np.testing.assert_array_equal(b1.label, b0.label)
+
+
+def test_a_scaled_walker_gets_the_scaled_finite_difference_jacobians():
+    """The finite-difference Jacobian steps in own units: the rescaled walker's Jacobian is
+    the thesis walker's with rate rows and columns rescaled; likewise `period_k_orbit`."""
+    (m0, g0), (m1, g1) = _gaits()
+    u0, u1 = _unit(m0), _unit(m1)
+    J0 = np.asarray(vj.stability.finite_difference_jacobian(m0, g0.z))
+    J1 = np.asarray(vj.stability.finite_difference_jacobian(m1, g1.z))
+    np.testing.assert_allclose(J1 * u0[:, None] / u1[:, None] * u1 / u0, J0, rtol=0, atol=1e-8)
+    p0 = vj.period_k_orbit(m0, g0.z, 2, iterations=3)
+    p1 = vj.period_k_orbit(m1, g1.z, 2, iterations=3)
+    assert p0.minimal_period == p1.minimal_period == 1
+    np.testing.assert_allclose(p1.multipliers_fd, p0.multipliers_fd, rtol=0, atol=1e-7)

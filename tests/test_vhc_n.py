@@ -114,3 +114,13 @@ def test_n_dof_vhc_search_reproduces_two_dof_problem_1():
     np.testing.assert_allclose(g_n.z, g_2.z, atol=1e-9)
     np.testing.assert_allclose(g_n.period, g_2.T, rtol=1e-9)
     np.testing.assert_allclose(g_n.x_minus, g_2.x_minus, atol=1e-8)
+    # The same search on the walker at another scale (lengths x 1e-6, masses x 1e6,
+    # gravity x 1e4: time unit x 1e-5): the same angles, rates and period rescaled.
+    k_time = np.sqrt(1e-6 / 1e4)
+    big = vhcjax.CompassGait(m1=5e6, m2=5e6, mH=1e7, a=5e-7, b=5e-7, g=9.81e4)
+    unit = np.array([1.0, 1.0 / k_time, 1.0 / k_time])
+    g_big = eqx.filter_jit(vhc_gait_search)(big, jnp.array([0.21, -1.1, -0.37]) * unit)
+    assert g_big.result == RESULTS.successful
+    np.testing.assert_allclose(np.asarray(g_big.z) / unit, g_n.z, rtol=0, atol=1e-10)
+    np.testing.assert_allclose(g_big.period, g_n.period * k_time, rtol=1e-10)
+    assert int(g_big.iterations) == int(g_n.iterations)

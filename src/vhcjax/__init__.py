@@ -28,6 +28,7 @@ from .hybrid import (
     StepResult as StepResult,
     continue_fixed_point as continue_fixed_point,
     fixed_point as fixed_point,
+    in_walker_units as in_walker_units,
     jacobian as poincare_jacobian,  # noqa: F401 (re-export)
     multipliers as poincare_multipliers,  # noqa: F401 (re-export)
     simulate as simulate,
@@ -76,6 +77,7 @@ from .control import (  # noqa: E402
     closed_loop_push_step as closed_loop_push_step,
     closed_loop_step as closed_loop_step,
     closed_loop_step_map as closed_loop_step_map,
+    default_weights as default_weights,
     in_domain as in_domain,
     input_matrix as input_matrix,
     jump_matrix as jump_matrix,

@@ -67,16 +67,12 @@ def analysed_gait(args):
 
 
 def in_walker_units(model, value, kind):
-    """A default given for the thesis's walker (1 m, 9.81 m/s^2), in the same proportion
-    to `model`'s own units (`scales`): a scaled walker gets the scaled default. `kind`:
-    `"angle"` (unchanged) or `"rate"` (1/s). (The push bound's is `push_bound`.)"""
-    import math
+    """`vhcjax.in_walker_units` as a float rounded to 12 digits (0.4, not
+    0.4000000000000001), for flags and printed defaults. `kind`: `"angle"` or `"rate"`.
+    (The push bound's is `push_bound`.)"""
+    from ..hybrid import in_walker_units as scaled
 
-    if kind == "angle":
-        return float(value)
-    thesis_time = math.sqrt(1.0 / 9.81)  # the thesis walker's time unit sqrt(l/g), s
-    ratio = thesis_time / float(model.scales()["time"])
-    return float(f"{value * ratio:.12g}")  # 0.4, not 0.4000000000000001
+    return float(f"{float(scaled(model, value, kind)):.12g}")
 
 
 def report_stability(args, model, z, out, consequence):

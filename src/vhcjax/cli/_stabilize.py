@@ -50,24 +50,26 @@ def register(subparsers):
         "--q",
         default=None,
         metavar="Q1,Q2,...",
-        help="diagonal LQR weights per second on the transverse coordinates, 0 or in "
-        "[1e-8, 1e8], not all 0: compass gait (delta q2, delta dq1, delta dq2), "
-        "kneed walker (delta q2, delta q3, delta dq1, delta dq2, delta dq3); default all 1",
+        help="diagonal LQR weights per second on the transverse coordinates, not all 0: "
+        "compass gait (delta q2, delta dq1, delta dq2), kneed walker (delta q2, delta q3, "
+        "delta dq1, delta dq2, delta dq3); default all 1 for the thesis walker, the same "
+        "problem in a rescaled walker's units; each nonzero weight within [1e-8, 1e8] "
+        "times its default",
     )
     p.add_argument(
         "--q-jump",
         default=None,
         metavar="Q1,Q2,...",
-        help="diagonal LQR weights per heel strike on the same coordinates, 0 or in "
-        "[1e-8, 1e8] (default: the --q numbers)",
+        help="diagonal LQR weights per heel strike on the same coordinates, >= 0 "
+        "(default: the --q numbers times T/T0, T = sqrt(l/g) of this walker and T0 of the "
+        "thesis walker's)",
     )
     p.add_argument(
         "--r",
         default=None,
         metavar="R[,R2]",
-        help="LQR weight per second on each torque, in [1e-8, 1e8]: one value for all, "
-        "or one per "
-        "torque (kneed walker: hip,knee); default 1",
+        help="LQR weight per second on each torque: one value for all, or one per torque "
+        "(kneed walker: hip,knee); default 1 for the thesis walker, scaled like --q",
     )
     p.add_argument(
         "--torque-limit",
@@ -129,26 +131,50 @@ def _numbers(flag, text, n, names):
 
 
 def _weights(args):
+    """--q, --r and --q-jump as given (lists, `None` where not given), their signs and
+    counts checked; the range check needs the walker (`_scaled_weights`)."""
     coords, torques = _COORDINATES[args.model], _TORQUES[args.model]
-    text = args.q if args.q is not None else ",".join("1" * len(coords))
-    q = _numbers("--q", text, len(coords), coords)
+    q = q_jump = r = None
+    if args.q is not None:
+        q = _numbers("--q", args.q, len(coords), coords)
+        if min(q) < 0 or max(q) == 0:
+            raise CLIError(f"--q must be >= 0 and not all zero, got {shown(args.q)}")
+    if args.q_jump is not None:
+        q_jump = _numbers("--q-jump", args.q_jump, len(coords), coords)
+        if min(q_jump) < 0:
+            raise CLIError(f"--q-jump must be >= 0, got {shown(args.q_jump)}")
+    if args.r is not None:
+        n = 1 if "," not in args.r else len(torques)
+        r = _numbers("--r", args.r, n, torques)
+        if min(r) <= 0:
+            raise CLIError(f"--r must be positive, got {shown(args.r)}")
+        r = r * (len(torques) // n)
+    return q, r, q_jump
+
+
+def _scaled_weights(model, given):
+    """The weights `(q, r, q_jump)`: those given, the others `control.default_weights`
+    (the thesis walker's 1 in this walker's units; `q_jump`: `q` held over the time
+    unit). Each nonzero weight must be within `_WEIGHT_RANGE` of its default."""
+    import numpy as np
+
+    from ..control import default_weights
+
+    q0, r0, qj0 = (np.asarray(w).tolist() for w in default_weights(model))
+    q, r, q_jump = given
+    q = q0 if q is None else q
+    r = r0 if r is None else r
+    q_jump = [v * qj0[0] / q0[0] for v in q] if q_jump is None else q_jump
     lo, hi = _WEIGHT_RANGE
-    if min(q) < 0 or max(q) == 0:
-        raise CLIError(f"--q must be >= 0 and not all zero, got {shown(text)}")
-    if max(q) > hi or min(v for v in q if v > 0) < lo:
-        raise CLIError(f"--q: each nonzero weight must be in [{lo:g}, {hi:g}], got {shown(text)}")
-    text = args.q_jump if args.q_jump is not None else ",".join(f"{v!r}" for v in q)
-    q_jump = _numbers("--q-jump", text, len(coords), coords)
-    if any(v != 0 and not lo <= v <= hi for v in q_jump):
-        raise CLIError(f"--q-jump: each weight must be 0 or in [{lo:g}, {hi:g}], got {shown(text)}")
-    text = args.r if args.r is not None else "1"
-    n = 1 if "," not in text else len(torques)
-    r = _numbers("--r", text, n, torques)
-    if min(r) <= 0:
-        raise CLIError(f"--r must be positive, got {shown(text)}")
-    if max(r) > hi or min(r) < lo:
-        raise CLIError(f"--r: each weight must be in [{lo:g}, {hi:g}], got {shown(text)}")
-    return q, r * (len(torques) // n), q_jump
+    for flag, values, default in (("--q", q, q0), ("--q-jump", q_jump, qj0), ("--r", r, r0)):
+        if any(v != 0 and not lo <= v / d <= hi for v, d in zip(values, default)):
+            shown_default = ",".join(f"{d:.4g}" for d in default)
+            raise CLIError(
+                f"{flag}: each nonzero weight must be within [{lo:g}, {hi:g}] times its "
+                f"default ({shown_default} for this walker), got "
+                f"{','.join(f'{v:g}' for v in values)}"
+            )
+    return q, r, q_jump
 
 
 def _read_perturbation(args):
@@ -226,7 +252,7 @@ def _finite_or_none(obj):
 
 
 def run_stabilize(args):
-    q, r, q_jump = _check(args)
+    given = _check(args)
     check_figure_file(args.png, "--png")
     import equinox as eqx
     import jax
@@ -241,6 +267,7 @@ def run_stabilize(args):
 
     kneed = args.model == "kneed"
     model = walker_from_args(args)
+    q, r, q_jump = _scaled_weights(model, given)
     perturbation = _perturbation(args.perturbation_values, model)
     gait, _ = find_walker_gait(args, model, args.family or "stable")
     z = model.state_to_section(gait.x_plus)

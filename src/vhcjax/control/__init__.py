@@ -35,6 +35,7 @@ from ._feedback import (
 )
 from ._riccati import (
     RiccatiSolution as RiccatiSolution,
+    default_weights as default_weights,
     riccati_backward as riccati_backward,
     riccati_hamiltonian as riccati_hamiltonian,
 )

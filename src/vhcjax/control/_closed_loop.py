@@ -21,7 +21,14 @@ import jax.numpy as jnp
 
 from .._programs import stored_jit
 from .._results import RESULTS
-from ..hybrid import DEFAULT_CONFIG, SolverConfig, check_section_shape, flow
+from ..hybrid import (
+    DEFAULT_CONFIG,
+    SolverConfig,
+    check_section_shape,
+    flow,
+    in_walker_units,
+    section_rates,
+)
 from ..hybrid._simulate import section_units
 from ..robustness import direction, finish_step, impulse_velocity_jump, push_bound, swing_from
 from ._actuated import (
@@ -41,6 +48,7 @@ from ._feedback import (
 from ._riccati import (
     RiccatiSolution,
     _pieces,
+    default_weights,
     own_units,
     riccati_backward,
     riccati_hamiltonian,
@@ -183,7 +191,9 @@ def stabilize(
     - `z`: section coordinates of the gait (`model.state_to_section` of its post-impact
       state), a fixed point of the passive step map.
     - `Q`, `R`, `Q_jump`: LQR weights on $\\zeta$ (per second), on $u$ (per second) and on
-      $\\zeta^-$ at each heel strike; matrices or diagonals; default $I$, $I$, $Q$.
+      $\\zeta^-$ at each heel strike; matrices or diagonals; default
+      `vhcjax.default_weights`: $I$, $I$, $Q$ for the model class's default walker (the
+      thesis walker), the same problem in a rescaled walker's units.
     - `torque_limit`: saturation of each input (N m), default none.
     - `num_points`: phase-grid points of the tabulated orbit and gains.
     - `config`: `SolverConfig` of the hybrid steps (default `TIGHT_CONFIG`, 1e-12).
@@ -212,8 +222,10 @@ def stabilize(
 
 def _as_weights(model, Q, R, Q_jump):
     r, m = 2 * model.n_dof - 1, num_inputs(model)
-    Q = weight_matrix("Q", Q, r, jnp.eye(r))
-    return Q, weight_matrix("R", R, m, jnp.eye(m)), weight_matrix("Q_jump", Q_jump, r, Q)
+    Q0, R0, Q_jump0 = default_weights(model)
+    Q = weight_matrix("Q", Q, r, jnp.diag(Q0))
+    R = weight_matrix("R", R, m, jnp.diag(R0))
+    return Q, R, weight_matrix("Q_jump", Q_jump, r, Q * (Q_jump0[0] / Q0[0]))
 
 
 @stored_jit
@@ -275,7 +287,7 @@ def closed_loop_basin(
     z_star,
     *,
     axes=(0, 1),
-    half_widths=(0.05, 0.3),
+    half_widths=None,
     shape=(21, 21),
     num_steps=30,
     tol=1e-4,
@@ -284,7 +296,9 @@ def closed_loop_basin(
 ):
     """Basin slice of the gait `z_star` under `feedback` (use `ZeroFeedback` for the
     passive walker: the same code path). Jittable; all points in one `vmap`.
-    `half_widths`: of the grid along `axes` (rad, rad/s); `tol`: a start converged when
+    `half_widths`: of the grid along `axes` (rad, rad/s; default 0.05 rad on an angle and
+    0.3 rad/s on a rate for the thesis walker, in the same proportion to another
+    walker's time unit, `vhcjax.in_walker_units`); `tol`: a start converged when
     the section point after `num_steps` steps is within `tol` of the gait in the walker's
     own units (angles, and rates times `model.time_scale`).
 
@@ -292,6 +306,9 @@ def closed_loop_basin(
     """
     z_star = jnp.asarray(z_star, float)
     unit = section_units(model)
+    if half_widths is None:
+        default = in_walker_units(model, jnp.where(section_rates(model), 0.3, 0.05), "section")
+        half_widths = (default[axes[0]], default[axes[1]])
     ox = jnp.linspace(-half_widths[0], half_widths[0], shape[0])
     oy = jnp.linspace(-half_widths[1], half_widths[1], shape[1])
     X, Y = jnp.meshgrid(ox, oy, indexing="ij")

@@ -104,11 +104,45 @@ def weight_matrix(name, W, k, default):
     return W
 
 
-def _weights(system, Q, R, Q_jump):
+def default_weights(model):
+    """The default LQR weights `(Q, R, Q_jump)` (diagonals): $Q = R = Q_J = I$ for the
+    model class's default walker (`type(model)()`, e.g. the thesis walker), posed as the
+    same problem in `model`'s own units (`model.scales`), so that a rescaled walker gets
+    the rescaled feedback. With $t = T/T_0$ and $\tau$ the ratio of the torque units
+    $ML^2/T^2$: $Q = 1/t$ on angles and $t$ on rates, $Q_J = 1$ on angles and $t^2$ on
+    rates, $R = 1/(\tau^2 t)$. A model class without defaults gets $I$."""
+    n, m = model.n_dof, num_inputs(model)
+    try:
+        reference = type(model)()
+    except TypeError:
+        reference = model
+
+    def torque_and_time(walker):
+        sc = walker.scales()
+        T = jnp.asarray(walker.time_scale, dtype=float)
+        return sc["mass"] * sc["length"] ** 2 / T**2, T
+
+    torque, T = torque_and_time(model)
+    torque0, T0 = torque_and_time(reference)
+    t, tau = T / T0, torque / torque0
+    # an invalid model (NaN or negative parameters) is `bad_input` where it is solved:
+    # its weights only need to be valid
+    t = jnp.where(jnp.isfinite(t) & (t > 0), t, 1.0)
+    tau = jnp.where(jnp.isfinite(tau) & (tau > 0), tau, 1.0)
+    rate = jnp.arange(2 * n - 1) >= n - 1  # w = (q_2..q_n, dq_1..dq_n)
+    Q = jnp.where(rate, t, 1.0 / t)
+    Q_jump = jnp.where(rate, t**2, 1.0)
+    R = jnp.full(m, 1.0 / (tau**2 * t))
+    return Q, R, Q_jump
+
+
+def _weights(model, system, Q, R, Q_jump):
     r, m = system.B.shape[-2], system.B.shape[-1]
-    Q = weight_matrix("Q", Q, r, jnp.eye(r))
-    R = weight_matrix("R", R, m, jnp.eye(m))
-    Q_jump = weight_matrix("Q_jump", Q_jump, r, Q)
+    Q0, R0, Q_jump0 = default_weights(model)
+    Q = weight_matrix("Q", Q, r, jnp.diag(Q0))
+    R = weight_matrix("R", R, m, jnp.diag(R0))
+    # Q_jump defaults to Q held over the time unit (Q_J0 / Q_0 = T / T_0 on every entry)
+    Q_jump = weight_matrix("Q_jump", Q_jump, r, Q * (Q_jump0[0] / Q0[0]))
     return Q, R, Q_jump
 
 
@@ -213,7 +247,8 @@ def riccati_backward(
       runs backward through every domain and reset, the jump weight at the heel
       strike only).
     - `Q`, `R`, `Q_jump`: weights (matrices or diagonals, on all $2n-1$ coordinates);
-      default identities, and `Q_jump = Q`.
+      default `vhcjax.default_weights` (identities for the model class's default
+      walker), and `Q_jump` $= Q\\,T/T_0$ (equal to $Q$ for the default walker).
     - `tol`: stop when $\\max|\\Delta X(1^-)| \\le$ `tol` $(1 + \\max|X(1^-)|)$, $X$ in
       the walker's own units (entries times the units of their two coordinates over
       the cost's unit).
@@ -225,7 +260,7 @@ def riccati_backward(
     """
     doms, bases, _, dom = _pieces(system)
     D = len(doms)
-    Q, R, Q_jump = _weights(doms[0], Q, R, Q_jump)
+    Q, R, Q_jump = _weights(model, doms[0], Q, R, Q_jump)
     Rinv = jnp.linalg.inv(R)
     Qs = [reduce(P, Q) for P in bases]
     Qjs = _jump_weights(bases, Q_jump)
@@ -378,7 +413,7 @@ def riccati_hamiltonian(
     """
     doms, bases, k, dom = _pieces(system)
     D = len(doms)
-    Q, R, Q_jump = _weights(doms[0], Q, R, Q_jump)
+    Q, R, Q_jump = _weights(model, doms[0], Q, R, Q_jump)
     Rinv = jnp.linalg.inv(R)
     Qjs = _jump_weights(bases, Q_jump)
     Js = [reduced_jump(bases, d.J, i) for i, d in enumerate(doms)]

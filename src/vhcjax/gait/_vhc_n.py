@@ -21,6 +21,7 @@ import optimistix as optx
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import solve_to_event
+from ..hybrid._simulate import section_units
 from ._vhc import constraint, phi_second_derivative
 
 
@@ -53,7 +54,8 @@ def _field(s, y, args):
 
 @stored_jit
 def vhc_orbit(model, z, *, rtol=1e-11, atol=1e-11, max_steps=4096):
-    """Integrate the VHC from the post-impact section point `z` to heel strike."""
+    """Integrate the VHC from the post-impact section point `z` to heel strike (`atol`
+    in the walker's own units: the time in units of `model.time_scale`)."""
     n = model.n_dof
     k = n - 1
     x_plus = model.section_to_state(jnp.asarray(z, float))
@@ -91,6 +93,8 @@ def vhc_orbit(model, z, *, rtol=1e-11, atol=1e-11, max_steps=4096):
         rtol=rtol,
         atol=atol,
         max_steps=max_steps,
+        # phi and phi' are angles and slopes, t is in the walker's time unit
+        units=(1.0, jnp.ones_like(y0).at[-1].set(model.time_scale)),
     )
     s_end, y_end = sol.ts[-1], sol.ys[-1]
     phi, dphi = y_end[:k], y_end[k : 2 * k]
@@ -122,7 +126,8 @@ class VHCGait(eqx.Module):
 
     - `z`: post-impact section coordinates; `x_plus`, `x_minus`: states at the ends of
       the arc; `period`; `energy` $E_0$.
-    - `iterations`, `residual` ($\\|z_{next} - z\\|_\\infty$), `result`.
+    - `iterations`, `residual` ($\\|z_{next} - z\\|_\\infty$ in the walker's own
+      units), `result`.
     """
 
     z: jax.Array
@@ -138,20 +143,24 @@ class VHCGait(eqx.Module):
 @stored_jit
 def vhc_gait_search(model, z0, *, rtol=1e-12, atol=1e-12, max_steps=40):
     """Newton (optimistix) on $z \\mapsto z_{next}(z) - z$ along the VHC arc (the n-DOF
-    Problem 1). Jacobians by `jax.jacfwd` through the $\\theta$-event. Never raises."""
+    Problem 1). Jacobians by `jax.jacfwd` through the $\\theta$-event. Newton, its
+    tolerances and `residual` are in the walker's own units (angles, and rates times
+    `model.time_scale`). Never raises."""
     z0 = jnp.asarray(z0, float)
+    unit = section_units(model)
 
-    def residual(z, _):
+    def residual(w, _):
+        z = w * unit
         orb = vhc_orbit(model, z)
-        r = orb.z_next - z
+        r = (orb.z_next - z) / unit
         return jnp.where(orb.result == RESULTS.successful, r, 1e3 * jnp.ones_like(r))
 
     sol = optx.root_find(
-        residual, optx.Newton(rtol=rtol, atol=atol), z0, max_steps=max_steps, throw=False
+        residual, optx.Newton(rtol=rtol, atol=atol), z0 / unit, max_steps=max_steps, throw=False
     )
-    z = sol.value
+    z = sol.value * unit
     orb = vhc_orbit(model, z)
-    res = jnp.max(jnp.abs(orb.z_next - z))
+    res = jnp.max(jnp.abs(orb.z_next - z) / unit)
     ok = (sol.result == optx.RESULTS.successful) & jnp.isfinite(res) & (res < 1e-8)
     code = RESULTS.where(
         orb.result != RESULTS.successful,

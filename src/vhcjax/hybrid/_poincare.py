@@ -243,11 +243,28 @@ def _homotopy_model(start, model, s):
     return jax.tree_util.tree_map(mix, start, model)
 
 
+def _parameter_units(start, model):
+    """A pytree like `model` holding each float parameter's unit: the larger of the two
+    walkers' `scales()` of its dimension (`UNITS`), 1 for a dimensionless one (angles)."""
+    import numpy as np
+
+    s0, s1 = start.scales(), model.scales()
+    out = jax.tree_util.tree_map(
+        lambda x: np.ones(np.shape(x)) if eqx.is_inexact_array(x) else x, model
+    )
+    for name, kind in getattr(model, "UNITS", {}).items():
+        unit = max(float(s0[kind]), float(s1[kind]))
+        value = np.full(np.shape(getattr(model, name)), unit)
+        out = eqx.tree_at(lambda m, name=name: getattr(m, name), out, value)
+    return out
+
+
 def continue_fixed_point(start, z_start, model, k=1, *, config=DEFAULT_CONFIG):
     """The fixed point of $P^k$ on `model` that continues the one of `start` near
     `z_start`: a homotopy in the parameters (every float parameter at once, geometrically
     where both ends are positive), each step solved by `fixed_point` from a secant
-    prediction. A step moves no parameter by more than 1.5 % at first, up to 6 % while
+    prediction (a parameter that is zero at either end moves by its change over its unit,
+    the walkers' `scales`). A step moves no parameter by more than 1.5 % at first, up to 6 % while
     steps succeed, and is halved where one fails, until it is 1/64 of the first (then
     the continuation stops there). So a gait family is
     followed to other parameters rather than Newton from a distant seed landing on
@@ -277,13 +294,12 @@ def continue_fixed_point(start, z_start, model, k=1, *, config=DEFAULT_CONFIG):
     k = check_map_steps(k)
     check_section_shape(start, np.asarray(z_start, float), "z_start")
     spread = 0.0
-    for x, y in zip(a, b):
+    units = jax.tree_util.tree_leaves(_parameter_units(start, model))
+    for x, y, u in zip(a, b, units):
         if eqx.is_inexact_array(x):
             x, y = np.asarray(x, float), np.asarray(y, float)
             positive = np.all(x > 0) and np.all(y > 0)
-            change = (
-                np.abs(np.log(y / x)) if positive else np.abs(y - x) / np.maximum(1.0, np.abs(x))
-            )
+            change = np.abs(np.log(y / x)) if positive else np.abs(y - x) / np.maximum(u, np.abs(x))
             spread = max(spread, float(np.max(change)))
     if not math.isfinite(spread):
         raise ValueError("continue_fixed_point: every parameter must be finite")

@@ -8,6 +8,7 @@ non-finite states are result codes per member, never silent NaNs, and never a Py
 on a traced value.
 """
 
+import math
 import operator
 from typing import NamedTuple
 
@@ -120,6 +121,30 @@ def section_units(model):
     """The units of the section coordinates (`model.state_to_section` of the state's
     units `_units`: section coordinates are a selection of state coordinates)."""
     return jnp.abs(model.state_to_section(_units(model)[1]))
+
+
+#: The thesis walker's time unit $\sqrt{l/g}$ (1 m, 9.81 m/s^2), s: defaults given in
+#: rad/s for it are scaled to another walker by `in_walker_units`.
+THESIS_TIME = math.sqrt(1.0 / 9.81)
+
+
+def in_walker_units(model, value, kind):
+    """A default given for the thesis walker (1 m, 9.81 m/s^2), in the same proportion to
+    `model`'s own units: `kind` `"angle"` (unchanged), `"rate"` (times $T_0/T$) or
+    `"section"` (`value` one number per section coordinate, rates scaled). Traceable."""
+    value = jnp.asarray(value, dtype=float)
+    ratio = THESIS_TIME / jnp.asarray(model.time_scale, dtype=float)
+    if kind == "angle":
+        return value
+    if kind == "rate":
+        return value * ratio
+    return jnp.where(section_rates(model), value * ratio, value)
+
+
+def section_rates(model):
+    """Which section coordinates are rates (a boolean mask; the others are angles)."""
+    n = model.n_dof
+    return model.state_to_section(jnp.concatenate([jnp.zeros(n), jnp.ones(n)])) > 0.5
 
 
 def controller(model, config, latch=False):

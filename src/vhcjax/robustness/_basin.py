@@ -20,7 +20,7 @@ import numpy as np
 from .._batching import MAX_DISPATCH, host_workers, padded_map
 from .._programs import stored_jit
 from .._results import result_codes
-from ..hybrid import FAST_CONFIG
+from ..hybrid import FAST_CONFIG, in_walker_units, section_rates
 from ._bisection import bisect_threshold
 from ._gait_check import require_gait
 from ._recovery import CONVERGED, recover
@@ -130,7 +130,7 @@ def basin_slice(
     z_star,
     *,
     axes=(0, 1),
-    half_widths=(0.1, 0.4),
+    half_widths=None,
     shape=(200, 200),
     num_steps=50,
     tol=1e-4,
@@ -146,7 +146,9 @@ def basin_slice(
 
     - `model`, `z_star`: the walker and its gait (section coordinates).
     - `axes`: the two perturbed coordinates, e.g. `(0, 1)` for $(q_1, \\dot q_1)$.
-    - `half_widths`: the grid spans `z_star[axes[i]] +- half_widths[i]`. Grids with an
+    - `half_widths`: the grid spans `z_star[axes[i]] +- half_widths[i]` (rad, rad/s).
+      Default: 0.1 rad on an angle and 0.4 rad/s on a rate for the thesis walker, in the
+      same proportion to another walker's time unit (`vhcjax.in_walker_units`). Grids with an
       odd number of points contain the gait itself (one point: the gait's coordinate).
     - `shape`: grid points along each axis (200 x 200 by default).
     - `num_steps`: steps simulated per point (at most).
@@ -161,6 +163,11 @@ def basin_slice(
     """
     z_star = np.asarray(z_star, dtype=float)
     nx, ny = shape
+    if len(set(axes)) != 2 or not all(0 <= a < z_star.shape[0] for a in axes):
+        raise ValueError(f"basin_slice: axes must be two distinct section coordinates, got {axes}")
+    if half_widths is None:
+        default = in_walker_units(model, np.where(section_rates(model), 0.4, 0.1), "section")
+        half_widths = tuple(float(np.asarray(default)[a]) for a in axes)
     hw = np.asarray(half_widths, float)
     if hw.shape != (2,) or not (np.isfinite(hw).all() and (hw > 0).all()):
         raise ValueError(
@@ -170,8 +177,6 @@ def basin_slice(
         raise ValueError(f"basin_slice: shape must be two positive integers, got {shape}")
     if int(num_steps) < 1:
         raise ValueError(f"basin_slice: num_steps must be at least 1, got {num_steps}")
-    if len(set(axes)) != 2 or not all(0 <= a < z_star.shape[0] for a in axes):
-        raise ValueError(f"basin_slice: axes must be two distinct section coordinates, got {axes}")
     require_gait(model, z_star, "basin_slice")
     ox = np.linspace(-hw[0], hw[0], nx) if nx > 1 else np.zeros(1)
     oy = np.linspace(-hw[1], hw[1], ny) if ny > 1 else np.zeros(1)

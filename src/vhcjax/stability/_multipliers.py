@@ -20,7 +20,7 @@ from .._batching import padded_map
 from .._programs import stored_jit
 from .._results import RESULTS, result_codes, result_names
 from ..hybrid import DEFAULT_CONFIG, flow, step_map, step_unchecked
-from ..hybrid._simulate import state_distance
+from ..hybrid._simulate import section_units, state_distance
 from ._transverse import TransverseLinearization, transverse_linearization
 
 
@@ -281,17 +281,18 @@ def _check_single_domain(model, transverse, name):
 
 @stored_jit
 def finite_difference_jacobian(model, z, k=1, h=1e-6, config=DEFAULT_CONFIG):
-    """Central finite differences of $P^k$: an autodiff-free check of `jacobian`."""
+    """Central finite differences of $P^k$: an autodiff-free check of `jacobian`. The
+    step along each section coordinate is `h` times its unit (`model.time_scale` makes
+    rates dimensionless), so that a rescaled walker gets the rescaled Jacobian."""
     z = jnp.asarray(z, float)
-    eye = jnp.eye(z.shape[0], dtype=z.dtype)
+    steps = h * section_units(model) * jnp.eye(z.shape[0], dtype=z.dtype)
 
-    def col(e):
+    def col(d):
         return (
-            step_map(model, z + h * e, k, config).z_next
-            - step_map(model, z - h * e, k, config).z_next
-        ) / (2 * h)
+            step_map(model, z + d, k, config).z_next - step_map(model, z - d, k, config).z_next
+        ) / (2 * jnp.max(d))
 
-    return jax.vmap(col, out_axes=1)(eye)
+    return jax.vmap(col, out_axes=1)(steps)
 
 
 # ---- why the transverse multipliers are not used -------------------------------------

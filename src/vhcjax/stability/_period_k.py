@@ -15,6 +15,7 @@ from ..hybrid import (
     simulate,
     step_map,
 )
+from ..hybrid._simulate import section_units
 from ._multipliers import _sort
 
 
@@ -49,6 +50,8 @@ def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG, *, iterations=20, h=1e-6
 
     $P^k$ and its Jacobian are composed from $k$ one-step maps and one-step Jacobians
     (autodiff through each heel strike): the compiled one-step programs serve every $k$.
+    Residuals, the finite-difference step `h` and the test for a shorter period are in
+    the walker's own units (angles, and rates times `model.time_scale`).
     Newton stops at a residual below 1e-12 (`successful`), after `iterations`
     (`not_converged`), or at a failed step (its code; `residual` is then `inf`: the
     failed map holds its state, which is no convergence). An invalid model is
@@ -76,27 +79,32 @@ def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG, *, iterations=20, h=1e-6
             z = np.asarray(r.z_next)
         return z, J, np.stack(orbit), np.asarray(periods), code
 
+    unit = np.asarray(section_units(model))
     z = np.asarray(z0, float)
     for _ in range(iterations):
         zk, J, orbit, periods, code = Pk(z, True)
-        res = float(np.max(np.abs(zk - z)))
+        res = float(np.max(np.abs(zk - z) / unit))
         if code != RESULTS.successful or not np.isfinite(res) or res < 1e-12:
             break
         z = z - np.linalg.solve(J - np.eye(len(z)), zk - z)
     else:
         zk, J, orbit, periods, code = Pk(z, True)
-        res = float(np.max(np.abs(zk - z)))
+        res = float(np.max(np.abs(zk - z) / unit))
     if code == RESULTS.successful and not res < 1e-12:
         code = RESULTS.not_converged
     if code != RESULTS.successful and not code == RESULTS.not_converged:
         res = float("inf")
     eye = np.eye(len(z))
     Jfd = np.stack(
-        [(Pk(z + h * e, False)[0] - Pk(z - h * e, False)[0]) / (2 * h) for e in eye], axis=1
+        [
+            (Pk(z + h * u * e, False)[0] - Pk(z - h * u * e, False)[0]) / (2 * h * u)
+            for e, u in zip(eye, unit)
+        ],
+        axis=1,
     )
     minimal = k
     for j in range(1, k):
-        if k % j == 0 and np.max(np.abs(orbit[j] - orbit[0])) < 1e-7:
+        if k % j == 0 and np.max(np.abs(orbit[j] - orbit[0]) / unit) < 1e-7:
             minimal = j
             break
     return PeriodKOrbit(
