@@ -80,6 +80,45 @@ def test_a_second_process_loads_the_programs_and_gets_the_same_numbers(tmp_path)
     np.testing.assert_allclose(first["gaits"][0], first["gaits"][1], rtol=1e-9)  # VHC = shooting
 
 
+USER_SCRIPT = """
+import json, sys
+import jax.numpy as jnp, numpy as np
+sys.path.insert(0, sys.argv[1])
+import vhcjax as vj
+from vhcjax import _programs
+from _user_model import TRACES, RodWalker
+m = RodWalker(psi=0.03)
+fp = vj.fixed_point(m, jnp.array([0.2, -1.0, -0.2]))
+ev = vj.poincare_multipliers(m, fp.z)
+print(json.dumps({"z": np.asarray(fp.z).tolist(), "ev": np.abs(np.asarray(ev)).tolist(),
+                  "traces": TRACES[0], "stats": _programs.stats}))
+"""
+
+
+def test_a_second_process_loads_a_users_walker(tmp_path):
+    """The programs of a user's own walker (a class in the user's module) are stored too:
+    a second process traces none of its dynamics again and gets the same numbers."""
+    env = dict(os.environ, VHCJAX_CACHE_DIR=str(tmp_path / "cache"), VHCJAX_PROGRAMS="on")
+    tests = os.path.dirname(os.path.abspath(__file__))
+    runs = []
+    for _ in range(2):
+        out = subprocess.run(
+            [sys.executable, "-c", USER_SCRIPT, tests],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=900,
+        )
+        assert out.returncode == 0, out.stderr[-2000:]
+        runs.append(json.loads(out.stdout.splitlines()[-1]))
+    first, second = runs
+    assert first["stats"]["exported"] >= 2 and first["stats"]["loaded"] == 0
+    assert second["stats"]["exported"] == 0 and second["stats"]["loaded"] >= 2
+    # the fingerprint traces each method once, abstractly; the solves are not traced
+    assert second["traces"] < first["traces"]
+    assert second["z"] == first["z"] and second["ev"] == first["ev"]
+
+
 @pytest.fixture
 def store(tmp_path, monkeypatch):
     """A private program directory for this test, nothing loaded yet."""
@@ -133,18 +172,48 @@ def test_sources_edited_after_import_take_the_plain_path(store, monkeypatch):
     np.testing.assert_array_equal(np.asarray(a.z_next), np.asarray(b.z_next))
 
 
-def test_types_from_outside_the_library_are_not_stored(store, monkeypatch):
+def _walker_class(height):
+    """A user's walker (defined outside the library) whose swing foot strikes the ground
+    `height` above the compass gait's guard: the same class text for the same `height`."""
+
+    class MyWalker(vj.CompassGait):
+        def guard(self, q):
+            return super().guard(q) + height
+
+    return MyWalker
+
+
+def test_a_users_walker_is_stored_under_its_dynamics(store, monkeypatch):
+    """A walker class from outside the library is stored under the jaxprs of its methods:
+    the same dynamics (a class defined again alike) load the same program; other
+    dynamics under the same name, a different one."""
+    counts = _counts(monkeypatch)
+    z = jnp.array([0.2187, -1.0924, -0.3774])
+    a = vj.step_map(_walker_class(0.0)(), z)
+    assert counts == {"exported": 1, "loaded": 0, "unexportable": 0}
+    _programs._memo.clear()
+    b = vj.step_map(_walker_class(0.0)(), z)  # another class object, the same dynamics
+    assert counts == {"exported": 1, "loaded": 1, "unexportable": 0}
+    c = vj.step_map(_walker_class(1e-3)(), z)  # the same name, another guard
+    assert counts == {"exported": 2, "loaded": 1, "unexportable": 0}
+    plain = vj.step_map(vj.CompassGait(), z)
+    np.testing.assert_array_equal(np.asarray(a.z_next), np.asarray(b.z_next))
+    np.testing.assert_allclose(np.asarray(a.z_next), np.asarray(plain.z_next), rtol=0, atol=0)
+    assert not np.allclose(np.asarray(c.z_next), np.asarray(a.z_next))
+
+
+def test_what_cannot_be_fingerprinted_is_not_stored(store, monkeypatch):
+    """A walker with a public method the algorithms might call but the fingerprint does
+    not cover, and a function from outside the library, take the plain path."""
     counts = _counts(monkeypatch)
 
-    class MyWalker(vj.CompassGait):  # defined here: could change under the same name
-        pass
+    class WithInputs(vj.CompassGait):
+        def input_matrix(self, q):  # read by the control algorithms: not fingerprinted
+            return jnp.ones((2, 1))
 
     z = jnp.array([0.2187, -1.0924, -0.3774])
-    a = vj.step_map(MyWalker(), z)
-    b = vj.step_map(vj.CompassGait(), z)
-    assert counts == {"exported": 1, "loaded": 0, "unexportable": 0}  # only the library's
-    np.testing.assert_allclose(np.asarray(a.z_next), np.asarray(b.z_next), rtol=0, atol=0)
-    # a function defined outside the library is rejected the same way
+    vj.step_map(WithInputs(), z)
+    assert counts == {"exported": 0, "loaded": 0, "unexportable": 0}
     assert _programs._key(_double_map, ((print,), {}), None, (lambda x: x,), []) is None
 
 

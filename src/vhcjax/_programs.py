@@ -9,10 +9,13 @@ program is kept in the cache directory; a later process with the same vhcjax sou
 version, platform, static arguments and input shapes loads it and runs it, compiled
 code included from the compilation cache, without running the Python again.
 
+A walker model of a class defined outside vhcjax and the libraries it pins (a model
+class from a notebook, which could change under the same name) is keyed by its dynamics
+instead: the jaxprs of the model methods the algorithms call (`_model_fingerprint`).
 Calls under a transformation (`jit`, `vmap`, `grad`: tracers among the arguments),
-arguments spread over several devices, arguments of types defined outside vhcjax and the
-libraries it pins (a model class from a notebook could change under the same name),
-static arguments that print differently in every process (a lambda), or the cache turned
+arguments spread over several devices, arguments of other types defined outside those
+libraries, a walker with a public method the fingerprint does not cover, static
+arguments that print differently in every process (a lambda), or the cache turned
 off (`VHCJAX_CACHE_DIR=off`, or `VHCJAX_PROGRAMS=off` for these programs alone) take the
 plain `eqx.filter_jit` path. So do all calls of a process whose vhcjax source files
 changed after it imported vhcjax (an edited checkout, a reloaded module): the key holds
@@ -213,17 +216,131 @@ _PINNED = (
 )
 
 
-def _pinned(tree):
-    """Whether every node and leaf type of `tree` comes from a `_PINNED` package."""
-    ok = True
+#: The walker-model methods a stored program may call, with their arguments built from
+#: the model (`q`, `dq`: coordinates and rates; `x`: a state; `z`: a section point; `v`:
+#: a velocity in the plane; `f`: generalized forces). The program of a model class
+#: defined outside `_PINNED` (a user's own) is stored under the jaxprs of these methods.
+_MODEL_METHODS = {
+    "kinetic_energy": "q dq",
+    "kinetic_energy+base": "q dq v",
+    "potential_energy": "q",
+    "contact_point": "q",
+    "guard": "q",
+    "strike_gate": "q",
+    "fallen": "q",
+    "relabel": "q dq",
+    "section_to_state": "z",
+    "state_to_section": "x",
+    "energy": "x",
+    "impact": "x",
+    "vector_field": "t x",
+    "acceleration": "q dq",
+    "acceleration+force": "q dq f",
+    "mass_matrix": "q",
+    "coriolis_matrix": "q dq",
+    "gravity_vector": "q",
+    "validate": "",
+    "scales": "",
+    "in_own_units": "",
+    "with_slope": "t",
+    "slope_normal": "property",
+    "time_scale": "property",
+}
+_fingerprints = {}  # (class, structure, shapes) -> fingerprint of a model, or None
+
+
+def _model_fingerprint(model):
+    """Text that changes whenever the dynamics of `model`'s class could: its name, its
+    class attributes, and the jaxprs (constants included) of `_MODEL_METHODS`; `None`
+    where it cannot be taken (a public method outside `_MODEL_METHODS`, which the
+    algorithms might call, a multi-domain model, or a class attribute without a stable
+    text): such a model takes the plain path."""
+    from .hybrid import MultiDomainModel
+    from .mechanics import WalkerModel
+
+    if not isinstance(model, WalkerModel) or isinstance(model, MultiDomainModel):
+        return None
+    leaves, tree = jax.tree_util.tree_flatten(model)
+    shapes = [(np.shape(x), str(getattr(x, "dtype", type(x).__name__))) for x in leaves]
+    memo = (type(model), str(tree), repr(shapes))
+    if memo not in _fingerprints:
+        try:
+            _fingerprints[memo] = _take_fingerprint(model)
+        except Exception:  # a model that cannot be traced abstractly: the plain path
+            _fingerprints[memo] = None
+    return _fingerprints[memo]
+
+
+def _take_fingerprint(model):
+    import dataclasses
+
+    fields = {f.name for f in dataclasses.fields(model)}
+    parts = [f"{type(model).__module__}.{type(model).__qualname__}"]
+    for cls in type(model).__mro__:
+        if cls.__module__.split(".")[0] in _PINNED:
+            continue
+        for name, value in sorted(cls.__dict__.items()):
+            if name.startswith("_") or name in fields or name in _MODEL_METHODS:
+                continue  # private helpers reach the algorithms only through the methods
+            if callable(value) or isinstance(value, (property, staticmethod, classmethod)):
+                return None
+            text = repr(value)
+            if " at 0x" in text:
+                return None
+            parts.append(f"{cls.__qualname__}.{name}={text}")
+    n = model.n_dof
+    q = jax.numpy.zeros(n)
+    x = jax.numpy.zeros(2 * n)
+    z = jax.eval_shape(model.state_to_section, x)
+    args = {
+        "q": q,
+        "dq": q,
+        "x": x,
+        "z": jax.numpy.zeros(z.shape, z.dtype),
+        "v": jax.numpy.zeros(2),
+        "f": q,
+        "t": jax.numpy.zeros(()),
+    }
+    for key, spec in _MODEL_METHODS.items():
+        name = key.split("+")[0]
+        if spec == "property":
+            fn = lambda m, name=name: getattr(m, name)  # noqa: E731
+            inputs = ()
+        else:
+            fn = lambda m, *a, name=name: getattr(m, name)(*a)  # noqa: E731
+            inputs = tuple(args[a] for a in spec.split())
+        try:
+            closed = jax.make_jaxpr(fn)(model, *inputs)
+        except Exception as err:  # e.g. a method the class does not offer
+            parts.append(f"{key}: {type(err).__name__}")
+            continue
+        consts = hashlib.sha256()
+        for c in closed.consts:
+            c = np.asarray(c)
+            consts.update(f"{c.shape}{c.dtype}".encode() + c.tobytes())
+        parts.append(f"{key}: {closed} {consts.hexdigest()}")
+    return "\n".join(parts)
+
+
+def _foreign(tree):
+    """`""` where every node and leaf type of `tree` comes from a `_PINNED` package; the
+    fingerprints of the models among them that do not (`_model_fingerprint`); `None`
+    where another type does not, or a fingerprint cannot be taken."""
+    foreign = []
 
     def visit(x):
-        nonlocal ok
-        ok = ok and type(x).__module__.split(".")[0] in _PINNED
+        if type(x).__module__.split(".")[0] not in _PINNED:
+            foreign.append(x)
         return False  # descend into every node
 
     jax.tree_util.tree_flatten(tree, is_leaf=visit)
-    return ok
+    texts = []
+    for node in foreign:
+        text = _model_fingerprint(node)
+        if text is None:
+            return None
+        texts.append(text)
+    return "\0".join(texts)
 
 
 def _named(x):
@@ -247,7 +364,10 @@ def _call_text(fn, args, in_tree, static, leaves):
     could go stale: an argument of a type from outside `_PINNED`, or static arguments
     without a stable text (a function, printed with its address)."""
     text = repr(jax.tree_util.tree_map(_named, static))
-    if " at 0x" in text or not _pinned(args):
+    if " at 0x" in text:
+        return None
+    foreign = _foreign(args)
+    if foreign is None:
         return None
     parts = [
         _source(),
@@ -258,6 +378,7 @@ def _call_text(fn, args, in_tree, static, leaves):
         str(in_tree),
         text,
         repr([(x.shape, str(x.dtype)) for x in leaves]),
+        foreign,
     ]
     return "\0".join(parts)
 
