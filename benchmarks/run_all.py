@@ -1,7 +1,7 @@
 """Run every benchmark in this folder and print one table.
 
 Each script (`bench_simulate.py`, `bench_gait_search.py`, `bench_stability.py`,
-`bench_basin.py`) runs in a fresh Python process and writes its `--json` output; this
+`bench_basin.py`, `bench_cli.py`, `bench_calls.py`) runs in a fresh Python process and writes its `--json` output; this
 script reads those files and prints one row per job: vhcjax's time or throughput, the
 scipy implementation of the same job measured in the same run, their ratio, and
 vhcjax's compile time (reported separately, never included in the run time). A last
@@ -33,6 +33,7 @@ JOBS = [
     ("stability", "bench_stability.py", []),
     ("basin", "bench_basin.py", []),
     ("cli", "bench_cli.py", []),
+    ("calls", "bench_calls.py", []),
 ]
 
 
@@ -215,6 +216,25 @@ def _rows(name, res):
                 f"none: no JAX imported (`import vhcjax`: {h['import_s']:.1f} s)",
             )
         )
+        return rows
+    if name == "calls":
+        rows = []
+        for group in ("README ten lines", "a user's own model (RodWalker)"):
+            warm = [r for r in res["runs"]["warm_cache"]["rows"] if r["group"] == group]
+            cold = [r for r in res["runs"]["empty_cache"]["rows"] if r["group"] == group]
+            first = max(warm, key=lambda r: r["first_s"])
+            second = max(warm, key=lambda r: r["second_s"])
+            rows.append(
+                (
+                    f"{group}, each call in a fresh process: slowest first call "
+                    f"(`{first['call']}`); slowest second call (`{second['call']}`)",
+                    f"{first['first_s']:.1f} s; {second['second_s']:.2f} s",
+                    "-",
+                    "-",
+                    f"cached (empty cache: {sum(r['first_s'] for r in cold):.0f} s "
+                    "for all first calls)",
+                )
+            )
         return rows
     raise ValueError(name)
 

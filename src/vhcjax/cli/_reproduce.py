@@ -1,6 +1,6 @@
 """`vhcjax reproduce`: recompute thesis chapter 7 and write figures and a report."""
 
-from ._common import check_output_dir, progress
+from ._common import add_method_flag, check_output_dir, progress
 
 
 def register(subparsers):
@@ -20,6 +20,7 @@ def register(subparsers):
         action="store_true",
         help="small sizes (short sweeps, coarse basin, few slopes): for tests",
     )
+    add_method_flag(p)
     p.set_defaults(func=run_reproduce)
     return p
 
@@ -31,7 +32,7 @@ def run_reproduce(args):
 
     check_output_dir(args.out, "--out")
     bar = progress(total=N_SECTIONS, desc="reproduce", disable=True if args.quiet else None)
-    res = reproduce(args.out, quick=args.quick, progress=bar)
+    res = reproduce(args.out, quick=args.quick, progress=bar, method=args.method)
     bar.close()
     counts = ", ".join(f"{v} {k}" for k, v in sorted(res["verdict_counts"].items()))
     print(

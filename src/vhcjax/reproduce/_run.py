@@ -57,16 +57,20 @@ SIZES: dict[str, dict[str, Any]] = {
 N_SECTIONS = len(SECTIONS)
 
 
-def reproduce(out_dir, quick=False, progress=None):
+def reproduce(out_dir, quick=False, progress=None, method="auto"):
     """Recompute thesis chapter 7 and the library's analyses; write figures,
     `report.md` and `results.json` to `out_dir`. `progress`: a tqdm-like bar (one
-    `update(1)` per section). **Returns:** the results dict."""
+    `update(1)` per section). `method`: the gait search (`find_gaits`: `"auto"`, `"vhc"`
+    or `"shooting"`); the report names the method that found each gait.
+    **Returns:** the results dict."""
+    if method not in ("auto", "vhc", "shooting"):
+        raise ValueError(f"method must be 'auto', 'vhc' or 'shooting', got {method!r}")
     os.makedirs(out_dir, exist_ok=True)
     mode = "quick" if quick else "full"
     # Figures and report go to a private folder first and move into `out_dir` only when
     # every section has run: an interrupted run leaves `out_dir` as it was.
     with pending_folder(out_dir, ".reproduce-") as work:
-        run = Run(work, SIZES[mode])
+        run = Run(work, SIZES[mode], method)
         t_start = time.perf_counter()
         sections = []
         for key, title, fn in SECTIONS:

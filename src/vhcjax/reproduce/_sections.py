@@ -40,23 +40,28 @@ def _model(slope_deg):
     return CompassGait(psi=jnp.asarray(_deg(slope_deg)))
 
 
-def _gaits(slopes_deg, guesses, family):
-    """VHC gaits at `slopes_deg` from `guesses` (B, 2): one `find_gaits` call (padded to
+def _gaits(slopes_deg, guesses, family, method):
+    """Gaits at `slopes_deg` from `guesses` (B, 2; `None`: from the model's reference gait)
+    by `method` (`find_gaits`'s): one call (padded to
     a power of two, so that short vectors share one program; a single slope is sent
     twice, since `find_gaits` runs one member by a program of its own); numpy pytree."""
     slopes = np.atleast_1d(np.asarray(slopes_deg, float))
     n = len(slopes)
-    guesses = np.broadcast_to(np.asarray(guesses, float), (n, 2))
+    if guesses is not None:
+        guesses = np.broadcast_to(np.asarray(guesses, float), (n, 2))
     if n == 1:
-        slopes, guesses = np.repeat(slopes, 2), np.repeat(guesses, 2, axis=0)
-    g = find_gaits(CompassGait(), jnp.asarray(guesses), family, psi=jnp.radians(slopes))
+        slopes = np.repeat(slopes, 2)
+        guesses = None if guesses is None else np.repeat(guesses, 2, axis=0)
+    guesses = None if guesses is None else jnp.asarray(guesses)
+    g = find_gaits(CompassGait(), guesses, family, method, psi=jnp.radians(slopes))
     return jax.tree_util.tree_map(lambda x: np.asarray(x)[:n], g)
 
 
-def _family(slopes_deg, family):
-    """The `family` over `slopes_deg` by the library's slope sweep (`vhcjax.sweep`):
-    the `Sweep` and its gaits as a numpy pytree."""
-    sw = sweep(CompassGait(), np.radians(np.asarray(slopes_deg, float)), family, tangents=False)
+def _family(slopes_deg, family, method):
+    """The `family` over `slopes_deg` by the library's slope sweep (`vhcjax.sweep`, by
+    `method`): the `Sweep` and its gaits as a numpy pytree."""
+    slopes = np.radians(np.asarray(slopes_deg, float))
+    sw = sweep(CompassGait(), slopes, family, method, tangents=False)
     return sw, jax.tree_util.tree_map(np.asarray, sw.gaits)
 
 
@@ -200,6 +205,15 @@ GAIT_WORDS = {
 }
 
 
+#: `Gait.found_by` in words.
+METHOD_WORDS = {"vhc": "the VHC search", "shooting": "shooting"}
+
+
+def _found_by(g, name):
+    """The method that found the gait `g` (`None` where its search failed)."""
+    return g.found_by if name == "successful" else None
+
+
 def _result_words(name):
     """A search's result code in words: `"found"`, else the code's description."""
     if name == "successful":
@@ -214,6 +228,8 @@ class Run:
 
     out_dir: str
     sizes: dict
+    #: The gait search (`find_gaits`' `method`: "auto", "vhc" or "shooting").
+    method: str = "auto"
     #: The gaits of chapter 7 (numpy `Gait`s): stable3, unstable3, stable5, stable287,
     #: stable43 (the flip bracket's lower end) and uphill.
     gaits: dict = dataclasses.field(default_factory=dict)
@@ -228,12 +244,23 @@ class Run:
 def gaits(run, sec):
     # stable family: 3 deg (7.4), 5 deg (7.13), 2.87 deg (7.1), 4.30 deg (flip bracket),
     # and the uphill seed (7.17) with the same (minus) root
-    st = _gaits([3.0, 5.0, 2.87, 4.3, 3.0], [GUESS, GUESS, GUESS, GUESS, (0.20, 1.0)], "stable")
-    un = _gaits([3.0], [GUESS], "unstable")
+    # The thesis seeds are seeds of Problem 1 (the VHC search); shooting alone starts
+    # from the model's reference gait instead (continuation in the slope). The uphill
+    # solution (7.17)-(7.18) is one of Problem 1: always the VHC search's.
+    stable = [3.0, 5.0, 2.87, 4.3]
+    if run.method == "shooting":
+        st = _gaits(stable, None, "stable", "shooting")
+        up = _member(_gaits([3.0], [(0.20, 1.0)], "stable", "vhc"), 0)
+        un = _gaits([3.0], None, "unstable", "shooting")
+    else:
+        seeds = [GUESS, GUESS, GUESS, GUESS, (0.20, 1.0)]
+        st = _gaits([*stable, 3.0], seeds, "stable", run.method)
+        up = _member(st, 4)
+        un = _gaits([3.0], [GUESS], "unstable", run.method)
     run.gaits["stable3"], run.gaits["stable5"], run.gaits["stable287"], run.gaits["stable43"] = (
         _member(st, i) for i in range(4)
     )
-    run.gaits["uphill"] = _member(st, 4)
+    run.gaits["uphill"] = up
     run.gaits["unstable3"] = _member(un, 0)
     slopes = [3.0, 3.0, 5.0, 2.87]
     keys = ["stable3", "unstable3", "stable5", "stable287"]
@@ -246,7 +273,7 @@ def gaits(run, sec):
             p: float(getattr(run.gaits[k], p))
             for p in ("a", "b", "c", "d", "e", "f", "g", "h", "T", "E0", "residual")
         }
-        | {"result": names[k]}
+        | {"result": names[k], "found_by": _found_by(run.gaits[k], names[k])}
         for k in keys + ["uphill"]
     }
     for k in keys:
@@ -257,15 +284,32 @@ def gaits(run, sec):
     sec.text(
         "search results",
         "-",
-        "; ".join(f"{GAIT_WORDS[k]}: {_result_words(v)}" for k, v in names.items()),
+        "; ".join(
+            f"{GAIT_WORDS[k]}: {_result_words(v)}"
+            + (f" by {METHOD_WORDS[run.gaits[k].found_by]}" if v == "successful" else "")
+            for k, v in names.items()
+        ),
         "computed",
         "the uphill seed is expected to give no passive gait (thesis 7.17-7.18)",
     )
+    how = {
+        "auto": "the VHC search (thesis Problem 1), with shooting (Problem 2) for any gait "
+        "it misses",
+        "vhc": "the VHC search (thesis Problem 1) alone",
+        "shooting": "shooting (thesis Problem 2) alone",
+    }[run.method]
+    seeds = (
+        "from the model's reference gait, continued in the slope (the thesis seeds are "
+        "seeds of Problem 1); the uphill seed (7.17) by the VHC search, since (7.18) is a "
+        "solution of Problem 1"
+        if run.method == "shooting"
+        else "from the thesis seed (7.2) a0 = 0.20, b0 = -1.0 (uphill: b0 = +1.0, 7.17), "
+        "with the minus root of (5.13) (7.3) for the stable family and the plus root (7.8) "
+        "for the unstable one"
+    )
     sec.notes.append(
-        "The gaits of chapter 7 come from one batched call of the VHC search "
-        "(thesis Problem 1, `find_gaits`) from the thesis seed (7.2) a0 = 0.20, "
-        "b0 = -1.0 (uphill: b0 = +1.0, 7.17), with the minus root of (5.13) (7.3) for "
-        "the stable family and the plus root (7.8) for the unstable one; the slope "
+        f"The gaits of chapter 7 come from batched calls of `find_gaits` ({how}; the "
+        f"search results name the method that found each gait), {seeds}; the slope "
         "sweeps and the bifurcation diagram follow the families with `vhcjax.sweep`."
     )
 
@@ -619,7 +663,7 @@ def sweeps(run, sec):
     slopes = np.linspace(*S["sweep_range"], num=n)
     sw, mults = {}, {}
     for fam in ("stable", "unstable"):
-        sw[fam], g = _family(slopes, fam)
+        sw[fam], g = _family(slopes, fam, run.method)
         ok = np.array(result_names(g.result)) == "successful"
         z = np.asarray(g.z)
         mm = _multipliers(slopes, z)
@@ -705,7 +749,7 @@ def doubling(run, sec):
         fa = fb = float("nan")
         for _ in range(S["pd_rounds"]):
             s = np.linspace(a, b, CHUNK)
-            g = _gaits(s, z_lo[:2], "stable")
+            g = _gaits(s, z_lo[:2], "stable", run.method)
             mm = _multipliers(s, np.asarray(g.z))
             f = np.prod(1 + mm[method], axis=1).real  # det(I + J)
             k = np.where(np.sign(f[:-1]) != np.sign(f[1:]))[0]
@@ -739,7 +783,7 @@ def bifurcation(run, sec):
     S = run.sizes
     n = S["bif_n"]
     slopes = np.linspace(*S["bif_range"], num=n)
-    _, g = _family(slopes, "stable")
+    _, g = _family(slopes, "stable", run.method)
     ok = np.array(result_names(g.result)) == "successful"
     mm = _multipliers(slopes, np.asarray(g.z))
     diag = bifurcation_diagram(
