@@ -356,3 +356,18 @@ def test_the_command_line_warns_in_one_line_and_recomputes(store, monkeypatch, c
     lines = err.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("vhcjax simulate: warning: "), err
     assert str(store) in lines[0] and "traced again" in lines[0]
+
+
+def test_the_dense_simulation_is_stored(store, monkeypatch):
+    """`simulate(..., dense_points=N)` holds no host callback: it is exported like the
+    rest, and a later load gives the same trajectory."""
+    counts = _counts(monkeypatch)
+    model = vj.CompassGait()
+    x = model.section_to_state(jnp.array([0.2187, -1.0924, -0.3774]))
+    a = vj.simulate(model, x, 2, dense_points=7)
+    assert counts == {"exported": 1, "loaded": 0, "unexportable": 0}
+    _programs._memo.clear()
+    b = vj.simulate(model, x, 2, dense_points=7)
+    assert counts == {"exported": 1, "loaded": 1, "unexportable": 0}
+    np.testing.assert_array_equal(np.asarray(a.dense_x), np.asarray(b.dense_x))
+    assert np.asarray(a.dense_x).shape == (2, 7, 4)

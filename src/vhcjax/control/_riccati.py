@@ -114,7 +114,7 @@ def default_weights(model):
     n, m = model.n_dof, num_inputs(model)
     try:
         reference = type(model)()
-    except TypeError:
+    except (TypeError, ValueError):  # a class without defaults
         reference = model
 
     def torque_and_time(walker):

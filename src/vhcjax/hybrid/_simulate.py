@@ -458,16 +458,18 @@ def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
         )
         if dense_points and not multidomain_dense:
             ts = jnp.linspace(0.0, 1.0, dense_points) * jnp.where(alive, sr.period, 0.0)
+            # the solver's interpolant, evaluated at `ts` (as `SaveAt(ts=...)` does, but
+            # without its host-side check of the times: the program stays storable)
             sol = flow(
                 model,
                 x,
                 jnp.where(alive, sr.period, 0.0) + 1e-12 * model.time_scale,
                 config,
-                saveat=diffrax.SaveAt(ts=ts),
+                saveat=diffrax.SaveAt(dense=True),
                 event=False,
             )
-            assert sol.ys is not None  # saved at `ts`
-            dense = (ts, jnp.where(alive, sol.ys, x))
+            ys = jax.vmap(sol.evaluate)(ts)
+            dense = (ts, jnp.where(alive, ys, x))
         return (x_next, ok, new_fail), (out, dense)
 
     init = (x0, valid, RESULTS.where(valid, RESULTS.successful, RESULTS.bad_input))
