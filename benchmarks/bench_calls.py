@@ -149,10 +149,10 @@ def main(argv=None):
             return 1
         runs[label] = dict(json.loads(out.stdout.strip().splitlines()[-1]), wall_s=wall)
     res = dict(runs=runs)
-    print(f"{'call':<60} {'empty cache: 1st':>17} {'warm: 1st':>10} {'warm: 2nd':>10}")
+    print(f"{'call':<72} {'empty cache: 1st':>17} {'warm: 1st':>10} {'warm: 2nd':>10}")
     for a, b in zip(runs["empty_cache"]["rows"], runs["warm_cache"]["rows"]):
         name = f"{b['group']}: {b['call']}"
-        print(f"{name:<60} {a['first_s']:>15.2f} s {b['first_s']:>8.2f} s {b['second_s']:>8.3f} s")
+        print(f"{name:<72} {a['first_s']:>15.2f} s {b['first_s']:>8.2f} s {b['second_s']:>8.3f} s")
     warm = runs["warm_cache"]["rows"]
     res["warm_first_max"] = max(warm, key=lambda r: r["first_s"])
     res["warm_second_max"] = max(warm, key=lambda r: r["second_s"])
