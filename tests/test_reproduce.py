@@ -191,25 +191,22 @@ def test_key_numbers(quick_run):
     assert 4.38 < pd["poincare"] < 4.40
 
 
-def test_the_gaits_section_by_each_method(tmp_path):
-    """`reproduce --method`: the gaits of chapter 7 by the VHC search alone and by
-    shooting alone are the same gaits, and the section names the method of each."""
+def test_the_gaits_section_by_each_method(quick_run, tmp_path):
+    """`reproduce --method`: the gaits of chapter 7 by shooting alone are those of the
+    default run (the VHC search), and the section names the method of each."""
     from vhcjax.reproduce import _sections as S
 
-    found = {}
-    for method in ("vhc", "shooting"):
-        run = S.Run(str(tmp_path), _run.SIZES["quick"], method)
-        sec = R.Section("gaits", "gaits")
-        S.gaits(run, sec)
-        found[method] = sec.results
-        for key in ("stable3", "unstable3", "stable5", "stable287"):
-            assert sec.results[key]["found_by"] == method
-        words = {"vhc": "by the VHC search", "shooting": "by shooting"}[method]
-        assert any(words in str(row) for row in sec.rows)
-        assert f"{method == 'vhc' and 'VHC search' or 'shooting'}" in " ".join(sec.notes)
+    auto = quick_run[1]["sections"]["gaits"]["results"]
+    run = S.Run(str(tmp_path), _run.SIZES["quick"], "shooting")
+    sec = R.Section("gaits", "gaits")
+    S.gaits(run, sec)
+    assert any("by shooting" in str(row) for row in sec.rows)
+    assert "shooting (thesis Problem 2) alone" in " ".join(sec.notes)
     for key in ("stable3", "unstable3", "stable5", "stable287"):
+        assert auto[key]["found_by"] == "vhc" and sec.results[key]["found_by"] == "shooting"
         for p in ("a", "b", "f"):
-            assert math.isclose(
-                found["vhc"][key][p], found["shooting"][key][p], rel_tol=0, abs_tol=1e-9
-            ), (key, p)
-        assert math.isclose(found["vhc"][key]["T"], found["shooting"][key]["T"], rel_tol=1e-9)
+            assert math.isclose(auto[key][p], sec.results[key][p], rel_tol=0, abs_tol=1e-9), (
+                key,
+                p,
+            )
+        assert math.isclose(auto[key]["T"], sec.results[key]["T"], rel_tol=1e-9)
