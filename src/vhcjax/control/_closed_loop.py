@@ -48,11 +48,10 @@ from ._feedback import (
 from ._riccati import (
     RiccatiSolution,
     _pieces,
-    default_weights,
     own_units,
     riccati_backward,
     riccati_hamiltonian,
-    weight_matrix,
+    weights,
 )
 from ._transverse import (
     HybridTransverseSystem,
@@ -206,7 +205,7 @@ def stabilize(
     z = jnp.asarray(z, float)
     check_section_shape(model, z)
     # Weights, torque limit and gait as arrays: one compiled program serves them all.
-    Q, R, Q_jump = _as_weights(model, Q, R, Q_jump)
+    Q, R, Q_jump = weights(model, Q, R, Q_jump)
     check_torque_limit(torque_limit)
     return _stabilize(
         model,
@@ -218,14 +217,6 @@ def stabilize(
         num_points=num_points,
         config=config,
     )
-
-
-def _as_weights(model, Q, R, Q_jump):
-    r, m = 2 * model.n_dof - 1, num_inputs(model)
-    Q0, R0, Q_jump0 = default_weights(model)
-    Q = weight_matrix("Q", Q, r, jnp.diag(Q0))
-    R = weight_matrix("R", R, m, jnp.diag(R0))
-    return Q, R, weight_matrix("Q_jump", Q_jump, r, Q * (Q_jump0[0] / Q0[0]))
 
 
 @stored_jit

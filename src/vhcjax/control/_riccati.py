@@ -136,14 +136,15 @@ def default_weights(model):
     return Q, R, Q_jump
 
 
-def _weights(model, system, Q, R, Q_jump):
-    r, m = system.B.shape[-2], system.B.shape[-1]
+def weights(model, Q, R, Q_jump):
+    """`(Q, R, Q_jump)` as matrices (`weight_matrix`), each defaulting to
+    `default_weights(model)`; `Q_jump` to `Q` held over the time unit
+    ($Q_{J0}/Q_0 = T/T_0$ on every entry)."""
+    r, m = 2 * model.n_dof - 1, num_inputs(model)
     Q0, R0, Q_jump0 = default_weights(model)
     Q = weight_matrix("Q", Q, r, jnp.diag(Q0))
     R = weight_matrix("R", R, m, jnp.diag(R0))
-    # Q_jump defaults to Q held over the time unit (Q_J0 / Q_0 = T / T_0 on every entry)
-    Q_jump = weight_matrix("Q_jump", Q_jump, r, Q * (Q_jump0[0] / Q0[0]))
-    return Q, R, Q_jump
+    return Q, R, weight_matrix("Q_jump", Q_jump, r, Q * (Q_jump0[0] / Q0[0]))
 
 
 def _gains(system, X, R):
@@ -260,7 +261,7 @@ def riccati_backward(
     """
     doms, bases, _, dom = _pieces(system)
     D = len(doms)
-    Q, R, Q_jump = _weights(model, doms[0], Q, R, Q_jump)
+    Q, R, Q_jump = weights(model, Q, R, Q_jump)
     Rinv = jnp.linalg.inv(R)
     Qs = [reduce(P, Q) for P in bases]
     Qjs = _jump_weights(bases, Q_jump)
@@ -413,7 +414,7 @@ def riccati_hamiltonian(
     """
     doms, bases, k, dom = _pieces(system)
     D = len(doms)
-    Q, R, Q_jump = _weights(model, doms[0], Q, R, Q_jump)
+    Q, R, Q_jump = weights(model, Q, R, Q_jump)
     Rinv = jnp.linalg.inv(R)
     Qjs = _jump_weights(bases, Q_jump)
     Js = [reduced_jump(bases, d.J, i) for i, d in enumerate(doms)]
