@@ -310,8 +310,8 @@ def transverse_linearization(
 
     T_unit, x_unit, perp_unit = _own_units(model)
 
-    def cond(t, y, args, **kwargs):
-        return y[0] - theta_end
+    def cond(t, y, args, **kwargs):  # in time units, as the root finder's `atol` (angle x T)
+        return (y[0] - theta_end) * T_unit
 
     event = diffrax.Event(cond, root_finder=event_root_finder(model), direction=False)
     sol = diffrax.diffeqsolve(
