@@ -1,7 +1,8 @@
 """vhcjax composes like a JAX library, for a user's own model (`_user_model.RodWalker`):
-a second call with the same shapes traces nothing, and the public functions that return
-numbers work under `jax.jit`, `jax.vmap` and `jax.jacfwd`, with derivatives equal to
-central differences."""
+a second call with the same shapes traces nothing (`CALLS`); the gait search, its
+multipliers and spectral radius work under `jax.jit`, `jax.vmap`, `jax.jacfwd` and
+`jax.grad`, with derivatives equal to central differences; the host-side studies refuse
+a trace in one line that names the traceable function to use."""
 
 import jax
 import jax.numpy as jnp
@@ -128,3 +129,56 @@ def test_a_failing_member_does_not_sink_the_batch():
     gaits = jax.vmap(search)(jnp.array([0.03, 0.6]))
     assert vj.result_names(gaits.result) == ["successful", "not_converged"]
     np.testing.assert_allclose(gaits.x_plus[0], search(jnp.asarray(0.03)).x_plus, atol=1e-12)
+
+
+HOST_SIDE = [
+    "atlas",
+    "basin_slice",
+    "basin_volume",
+    "bifurcation_diagram",
+    "bisect_threshold",
+    "continue_fixed_point",
+    "contraction",
+    "design",
+    "family_multipliers",
+    "flip_slopes",
+    "max_converging_perturbation",
+    "max_floor_step",
+    "max_push",
+    "period1_family",
+    "period2_branch",
+    "period_doubling_slope",
+    "slope_sensitivity",
+    "sweep",
+]
+
+
+@pytest.mark.parametrize("name", HOST_SIDE)
+def test_host_side_functions_refuse_a_trace_in_one_line(name):
+    """The functions that loop on the host (sweeps, scans, bisections, optimisers) raise
+    one `TypeError` naming themselves and the traceable alternative under `jit` (even
+    with only constants inside the trace), before any work."""
+    fn = getattr(vj, name)
+    with pytest.raises(TypeError, match=f"^{name} runs on the host .* use "):
+        jax.jit(lambda psi: fn(psi))(0.03)
+    with pytest.raises(TypeError, match=f"^{name} runs on the host"):
+        jax.jit(lambda: fn(0.03))()
+
+
+def test_host_side_functions_under_vmap_and_grad_with_real_arguments():
+    """The same one line under `vmap` and `grad` of a real call, and the plain call
+    still works."""
+    z = _gait_z()
+    with pytest.raises(TypeError, match="^sweep runs on the host .* `find_gaits`"):
+        jax.vmap(lambda psi: vj.sweep(vj.CompassGait(psi=psi), [0.05]))(jnp.array([0.05]))
+    with pytest.raises(TypeError, match="^family_multipliers runs on the host"):
+        jax.grad(
+            lambda psi: vj.family_multipliers(RodWalker(psi=psi), psi[None], z[None]).max_abs[0]
+        )(jnp.asarray(0.03))
+    fp, reached = vj.continue_fixed_point(
+        RodWalker(psi=jnp.asarray(0.03)), z, RodWalker(psi=jnp.asarray(0.031))
+    )
+    assert vj.result_names(fp.result) == "successful"
+    np.testing.assert_allclose(
+        fp.z, vj.fixed_point(RodWalker(psi=jnp.asarray(0.031)), z).z, atol=1e-10
+    )

@@ -248,3 +248,39 @@ def test_pushes_survived_with_and_without_feedback(gaits, stabilized):
     sr = eqx.filter_jit(vj.closed_loop_push_step)(m, st.feedback, x0, 0.2 * T, jnp.array([p, 0.0]))
     sim = vj.simulate_closed_loop(m, sr.x_plus, st.feedback, 25)
     assert _errors(m, z, sim)[-1] < 1e-4
+
+
+def test_control_layer_under_jit_vmap_and_jacfwd(gaits, stabilized):
+    """The control layer's numeric functions compose like JAX's: `jit` gives the plain
+    call's numbers, `vmap` each member's, `jacfwd` the central differences."""
+    m, z = gaits["unstable-3"]
+    st = stabilized["unstable-3"]
+    x_minus = st.system.x_minus
+    J, x_plus = vj.jump_matrix(m, x_minus)
+    np.testing.assert_allclose(jax.jit(vj.jump_matrix)(m, x_minus)[0], J, rtol=0, atol=1e-13)
+
+    def jump(psi):  # the jump matrix at a fixed pre-impact state, against the slope
+        return vj.jump_matrix(vj.CompassGait(psi=psi), x_minus)[0]
+
+    psi, h = m.psi, 1e-6
+    fd = (jump(psi + h) - jump(psi - h)) / (2 * h)
+    np.testing.assert_allclose(jax.jacfwd(jump)(psi), fd, rtol=0, atol=1e-7)
+
+    qs = jnp.stack([x_plus[:2], x_minus[:2]])
+    B = jax.vmap(lambda q: vj.input_matrix(m, q))(qs)
+    np.testing.assert_array_equal(B[1], vj.input_matrix(m, qs[1]))
+    for a, b in zip(jax.jit(vj.default_weights)(m), vj.default_weights(m), strict=True):
+        np.testing.assert_array_equal(a, b)
+
+    # The feedback law off the orbit: its state derivative, and the torque limit as a
+    # leaf that vmap batches (one program for every limit).
+    fb = st.feedback
+    x = m.section_to_state(z + 1e-2)
+    dx = jnp.eye(4) * 1e-6
+    fd = jnp.stack([(fb(x + d, m) - fb(x - d, m)) / 2e-6 for d in dx], axis=-1)
+    np.testing.assert_allclose(jax.jacfwd(lambda x: fb(x, m))(x), fd, rtol=0, atol=1e-6)
+    limits = jnp.array([0.3, 0.5, jnp.inf])
+    u = jax.vmap(lambda lim: vj.with_torque_limit(fb, lim)(x, m))(limits)
+    for lim, ui in zip(limits, u, strict=True):
+        np.testing.assert_array_equal(ui, vj.with_torque_limit(fb, lim)(x, m))
+    assert abs(float(u[0, 0])) == pytest.approx(0.3) and abs(float(u[2, 0])) > 0.5

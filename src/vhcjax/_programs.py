@@ -47,6 +47,8 @@ import jax
 import jax.core
 import numpy as np
 
+from ._host import tracing
+
 _SUFFIX = ".program"
 _memo = {}  # path of a stored program -> its `_Program`, or None for the plain path
 _lock = threading.RLock()  # reentrant: an export may call another stored function
@@ -548,15 +550,6 @@ def _store(path, record):
         raise
 
 
-def _traced(leaves):
-    """Whether a call is being traced: a tracer among its arguments, or a call inside
-    another program (`jit`, `scan`, ...), where even an array made of constants is a
-    tracer. It then becomes part of the program that calls it."""
-    return any(isinstance(x, jax.core.Tracer) for x in leaves) or isinstance(
-        jax.numpy.zeros(()), jax.core.Tracer
-    )
-
-
 def _spread(leaves):
     """Whether an argument is spread over several devices (not a stored program's
     single-device signature)."""
@@ -613,14 +606,14 @@ def stored_jit(fn):
         return top[0](*args, **kwargs)
 
     def plain(*args, **kwargs):
-        return run_plain(_traced(jax.tree_util.tree_leaves((args, kwargs))), args, kwargs)
+        return run_plain(tracing((args, kwargs)), args, kwargs)
 
     @functools.wraps(fn)
     def call(*args, **kwargs):
         require_x64()
         dynamic, static = eqx.partition((args, kwargs), eqx.is_array)
         leaves, in_tree = jax.tree_util.tree_flatten(dynamic)
-        traced = _traced(leaves)
+        traced = tracing(leaves)
         directory = program_directory()
         if traced or directory is None or _spread(leaves):
             return run_plain(traced, args, kwargs)

@@ -14,6 +14,7 @@ import jax
 import jax.numpy as jnp
 
 from .._batching import padded_map
+from .._host import host_only
 from .._programs import stored_jit
 from .._results import RESULTS, result_codes
 from ._continuation import _run_continuation, _tangent, _unknowns, continue_to_model
@@ -206,6 +207,7 @@ def _tangents(model, psis, zs, sign, method):
     )
 
 
+@host_only("`find_gaits` (one guess per slope) or vmap `find_gait`")
 def sweep(model, slopes, family="stable", method="auto", *, anchor_step=ANCHOR_STEP, tangents=True):
     r"""The `family` gait at every slope of `slopes` (rad).
 

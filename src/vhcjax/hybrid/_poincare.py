@@ -14,6 +14,7 @@ import jax.core
 import jax.numpy as jnp
 import optimistix as optx
 
+from .._host import host_only
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..solvers import detach, eigenvalues, implicit_outputs, linearised
@@ -259,6 +260,7 @@ def _parameter_units(start, model):
     return out
 
 
+@host_only("`fixed_point` from a nearby guess, or `find_gait`")
 def continue_fixed_point(start, z_start, model, k=1, *, config=DEFAULT_CONFIG):
     """The fixed point of $P^k$ on `model` that continues the one of `start` near
     `z_start`: a homotopy in the parameters (every float parameter at once, geometrically
@@ -281,9 +283,6 @@ def continue_fixed_point(start, z_start, model, k=1, *, config=DEFAULT_CONFIG):
 
     import numpy as np
 
-    leaves = jax.tree_util.tree_leaves((start, model, z_start))
-    if any(isinstance(x, jax.core.Tracer) for x in leaves):
-        raise TypeError("continue_fixed_point runs on the host: concrete inputs only")
     a, b = jax.tree_util.tree_leaves(start), jax.tree_util.tree_leaves(model)
     if jax.tree_util.tree_structure(start) != jax.tree_util.tree_structure(model) or any(
         not eqx.is_inexact_array(x) and not np.array_equal(x, y) for x, y in zip(a, b)

@@ -26,6 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._host import host_only
 from .._results import RESULTS, result_names
 from ..gait import find_gait
 from ..models import CompassGait  # design varies the compass gait's parameters (PARAMETERS)
@@ -208,6 +209,7 @@ def min_norm_element(G):
     return x
 
 
+@host_only("`jax.grad` of your objective through `find_gait`")
 def design(
     objective,
     vary,

@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import padded_map
+from .._host import host_only
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..gait import find_gait, find_gaits
@@ -132,6 +133,7 @@ class FlipScan(eqx.Module):
     reason: list = eqx.field(static=True)
 
 
+@host_only("`flip_slope`")
 def flip_slopes(
     model,
     z_start,

@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import MAX_DISPATCH, host_workers, padded_map
+from .._host import host_only
 from .._programs import stored_jit
 from .._results import result_codes
 from ..hybrid import FAST_CONFIG, in_walker_units, section_rates
@@ -125,6 +126,7 @@ def _reach(ok_line, offsets, sign):
     return best
 
 
+@host_only("vmap `recover`")
 def basin_slice(
     model,
     z_star,
@@ -221,6 +223,7 @@ def basin_slice(
     )
 
 
+@host_only("vmap `recover`")
 def max_converging_perturbation(
     model,
     z_star,
@@ -301,6 +304,7 @@ class BasinVolume(eqx.Module):
     confidence: float
 
 
+@host_only("vmap `recover`")
 def basin_volume(
     model,
     z_star,

@@ -17,6 +17,8 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._host import host_only
+
 
 class Threshold(eqx.Module):
     """Result of a batched bisection (numpy arrays, host side).
@@ -46,6 +48,7 @@ def _evaluate(survives, magnitudes):
     return out == 0, out.astype(int)
 
 
+@host_only("a bisection in `jax.lax` around your own test")
 def bisect_threshold(survives, lo_min, hi_max, *, iterations=20, scan=0, progress=None):
     """Bisect `survives` on `[lo_min, hi_max]` for every member (host loop, batched calls).
 

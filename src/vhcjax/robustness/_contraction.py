@@ -16,6 +16,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._host import host_only
 from .._programs import stored_jit
 from .._results import result_names
 from ..gait import section_in_units
@@ -74,6 +75,7 @@ def _first_below(dist, factor):
     return np.where(below.any(axis=1), below.argmax(axis=1) + 1, -1)
 
 
+@host_only("`gait_multipliers` (its spectral radius is the predicted rate)")
 def contraction(
     model,
     z_star,

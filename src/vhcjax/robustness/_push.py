@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._host import host_only
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, StepResult, classify_solve, flow
@@ -309,6 +310,7 @@ def push_bound(model, duration=0.0):
     return s["mass"] * s["acceleration"]
 
 
+@host_only("`push_sensitivity_autodiff` or vmap `impulse_step`")
 def max_push(
     model,
     x_star,

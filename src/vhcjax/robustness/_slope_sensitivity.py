@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._host import host_only
 from .._programs import stored_jit
 from ..hybrid import DEFAULT_CONFIG
 from ..solvers import implicit_outputs, linearised
@@ -88,6 +89,7 @@ def _implicit(model, z, config):
     return outs, dz, douts[1:], J, dJ
 
 
+@host_only("`jax.jacfwd` of `find_gait` with respect to the slope")
 def slope_sensitivity(model, z_star, *, config=DEFAULT_CONFIG):
     """Derivatives with respect to the slope of the gait through `z_star` (a fixed point
     of the step map of `model`, e.g. from `vhcjax.fixed_point`).

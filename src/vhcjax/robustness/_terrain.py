@@ -17,6 +17,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._host import host_only
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, step_unchecked
@@ -88,6 +89,7 @@ def terrain_recovery(
     )
 
 
+@host_only("`terrain_recovery`")
 def max_floor_step(
     model,
     x_star,

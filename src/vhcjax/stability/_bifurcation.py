@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import MAX_DISPATCH, host_workers, padded_map
+from .._host import host_only
 from .._programs import stored_jit
 from .._results import RESULTS, result_codes
 from ..hybrid import FAST_CONFIG, simulate
@@ -43,6 +44,7 @@ def _long_runs(model, psis, x0s, num_steps, num_record, config):
     return jax.vmap(one)(psis, x0s)
 
 
+@host_only("vmap `simulate`")
 def bifurcation_diagram(
     psis,
     zs,

@@ -7,6 +7,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._host import host_only
 from .._results import RESULTS, result_codes, results_from_codes
 from ..models import CompassGait  # the default model (thesis Table 1) where none is given
 
@@ -21,6 +22,7 @@ class Family(eqx.Module):
     result: RESULTS
 
 
+@host_only("vmap `find_gait`")
 def period1_family(
     psis,
     family="stable",

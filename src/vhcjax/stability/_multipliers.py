@@ -17,6 +17,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import padded_map
+from .._host import host_only
 from .._programs import stored_jit
 from .._results import RESULTS, result_codes, result_names
 from ..hybrid import DEFAULT_CONFIG, flow, step_map, step_unchecked
@@ -203,6 +204,7 @@ def _family_multipliers_padded(model, psis, zs, config, transverse):
     )
 
 
+@host_only("vmap `gait_multipliers`")
 def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, transverse=True, mesh=None):
     """`gait_multipliers` for many slopes in one batched (`vmap`) call.
 
@@ -213,11 +215,6 @@ def family_multipliers(model, psis, zs, config=DEFAULT_CONFIG, *, transverse=Tru
     host-side function (concrete inputs; the result's leaves are numpy arrays); under
     `jit` or a derivative, `vmap` `gait_multipliers` instead.
     """
-    if any(isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves((model, psis, zs))):
-        raise TypeError(
-            "family_multipliers runs on the host (concrete inputs); under jit, vmap or a "
-            "derivative, vmap gait_multipliers instead"
-        )
     psis = np.atleast_1d(np.asarray(psis, float))
     zs = np.asarray(zs, float)
     x = jax.ShapeDtypeStruct((2 * model.n_dof,), jnp.float64)

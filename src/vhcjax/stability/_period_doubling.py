@@ -8,6 +8,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._host import host_only
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, fixed_point, step_map
 from ..hybrid._poincare import _jacobian as jacobian  # forward mode, as its callers need
@@ -39,6 +40,7 @@ class PeriodDoubling(eqx.Module):
     iterations: int
 
 
+@host_only("`flip_slope`")
 def period_doubling_slope(
     psi_lo,
     psi_hi,
@@ -92,6 +94,7 @@ def period_doubling_slope(
     return PeriodDoubling(psi, z, ev, (a, b), it)
 
 
+@host_only("`period_k_orbit` with k=2")
 def period2_branch(model, pd, psis, config=DEFAULT_CONFIG, amplitudes=(3e-3, 1e-2, 3e-2)):
     """Continue the period-2 gait born at the flip `pd` (a `PeriodDoubling`) over the
     slopes `psis` (rad, increasing, all past the flip).
