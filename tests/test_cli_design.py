@@ -147,6 +147,16 @@ def test_atlas_json_csv_png(tmp_path, capsys):
     text = capsys.readouterr().out
     assert_plain_text(text)
     assert "found in 2 of 2 cells" in text and "mu 2, beta 1: flip at 4.3909" in text
+    # with a checkpoint folder: the same JSON, and again from the folder alone
+    ck = tmp_path / "ck"
+    for _ in range(2):
+        assert main([*argv, "--json", "--checkpoint", str(ck)]) == 0
+        assert json.loads(capsys.readouterr().out) == out
+    assert sorted(p.name for p in ck.iterdir()) == ["cells-000000-000001.csv", "manifest.json"]
+    # a folder of another run is refused in one line, before any work
+    assert main([*argv[:-1], "3.5", "--checkpoint", str(ck)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "holds a run with other settings (slope)" in err and "\n" not in err
 
 
 def test_ratio_ranges_never_pass_stop():

@@ -8,6 +8,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+import pytest
 
 import vhcjax as vj
 from vhcjax.parameters._design import min_norm_element, with_parameters
@@ -193,3 +194,51 @@ def test_atlas_reports_no_flip_for_a_gait_already_past_one():
     g = vj.find_gait(m, "stable", "shooting")
     ev = np.asarray(vj.gait_multipliers(m, g, transverse=False).poincare)
     assert ev.real.min() < -1 and abs(ev.imag).max() < 1e-12
+
+
+def test_atlas_resumes_from_its_checkpoint(tmp_path, monkeypatch):
+    """An atlas with a checkpoint folder, stopped after its first chunk, resumes:
+    the same call again computes only the missing chunks, and its result equals an
+    uninterrupted run's to the last bit and the one-batch atlas's to 1e-12; a chunk file
+    cut short is computed again."""
+    import vhcjax.parameters._atlas as atlas_module
+
+    mu, beta = np.array([1.5, 2.0, 2.5]), np.array([1.0])
+    kw = dict(slope=math.radians(3.0), psi_start=math.radians(3.0), step=math.radians(1.0))
+    whole = vj.atlas(mu, beta, **kw)
+    real, computed, allowed = atlas_module._atlas, [], [1]  # chunks before the stop
+
+    class Stopped(Exception):  # a Ctrl-C or a killed job, as far as the folder can tell
+        pass
+
+    def counted(mu, *args, **kwargs):
+        if len(computed) == allowed[0]:
+            raise Stopped
+        computed.append(mu.tolist())
+        return real(mu, *args, **kwargs)
+
+    monkeypatch.setattr(atlas_module, "_atlas", counted)
+    run = lambda folder: vj.atlas(mu, beta, checkpoint=folder, chunk_cells=1, **kw)
+    ck = tmp_path / "ck"
+    with pytest.raises(Stopped):
+        run(ck)
+    assert sorted(p.name for p in ck.iterdir()) == ["cells-000000-000001.csv", "manifest.json"]
+    allowed[0] = 99
+    computed.clear()
+    resumed = run(ck)
+    assert computed == [[2.0], [2.5]]
+    computed.clear()
+    fresh = run(tmp_path / "fresh")
+    assert computed == [[1.5], [2.0], [2.5]]
+    for name in ("flip_slope", "stable_range", "spectral_radius"):
+        np.testing.assert_array_equal(getattr(resumed, name), getattr(fresh, name))
+        np.testing.assert_allclose(getattr(resumed, name), getattr(whole, name), rtol=0, atol=1e-12)
+    assert resumed.reason == fresh.reason == whole.reason
+    assert np.isfinite(resumed.spectral_radius).all()
+    # a chunk file cut short (a copy interrupted, say) is detected and computed again
+    cut = ck / "cells-000001-000002.csv"
+    cut.write_text(cut.read_text()[:-20])
+    computed.clear()
+    again = run(ck)
+    assert computed == [[2.0]]
+    np.testing.assert_array_equal(again.flip_slope, fresh.flip_slope)

@@ -144,6 +144,12 @@ def register(subparsers):
     )
     a.add_argument("--csv", metavar="FILE", help="one row per cell: " + ", ".join(ATLAS_CSV))
     a.add_argument("--png", metavar="FILE", help="heat map of the flip slope with contours")
+    a.add_argument(
+        "--checkpoint",
+        metavar="FOLDER",
+        help="write the cells to FOLDER in chunks as they finish (CSV files); the same "
+        "command run again, after an interruption, computes only the chunks not there",
+    )
     add_method_flag(a)
     a.set_defaults(func=run_atlas)
 
@@ -385,6 +391,7 @@ _REASONS = {
 def run_atlas(args):
     import numpy as np
 
+    from .._chunks import CheckpointError
     from ..parameters import atlas, atlas_json
 
     if args.mass_hip is not None:
@@ -415,18 +422,22 @@ def run_atlas(args):
         )
     if args.slope_deg is not None and args.slope_deg < args.scan_start_deg:
         raise CLIError("--slope-deg must not be below --scan-start-deg")
-    at = atlas(
-        np.asarray(mu),
-        np.asarray(beta),
-        slope=None if args.slope_deg is None else math.radians(args.slope_deg),
-        mass_leg=args.mass_leg,
-        leg_length=args.a + args.b,
-        gravity=args.gravity,
-        psi_start=math.radians(args.scan_start_deg),
-        psi_max=math.radians(args.scan_max_deg),
-        step=math.radians(args.scan_step_deg),
-        method=args.method,
-    )
+    try:
+        at = atlas(
+            np.asarray(mu),
+            np.asarray(beta),
+            slope=None if args.slope_deg is None else math.radians(args.slope_deg),
+            mass_leg=args.mass_leg,
+            leg_length=args.a + args.b,
+            gravity=args.gravity,
+            psi_start=math.radians(args.scan_start_deg),
+            psi_max=math.radians(args.scan_max_deg),
+            step=math.radians(args.scan_step_deg),
+            method=args.method,
+            checkpoint=args.checkpoint,
+        )
+    except CheckpointError as e:
+        raise CLIError(str(e)) from None
     rec = atlas_json(at)
     if args.csv:
         from .._io import atomic_open

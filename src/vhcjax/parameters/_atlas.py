@@ -15,6 +15,9 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._batching import report
+from .._chunks import ChunkStore
+from .._host import host_only
 from .._results import RESULTS
 from ..gait import find_gaits
 from ..models import CompassGait  # the atlas is over the compass gait's mass and length ratios
@@ -75,6 +78,7 @@ class Atlas(eqx.Module):
     step: float = eqx.field(static=True)
 
 
+@host_only("vmap `find_gait` and `flip_slope` over models")
 def atlas(
     mass_ratio,
     length_ratio,
@@ -88,6 +92,8 @@ def atlas(
     step=math.radians(0.5),
     tol=1e-10,
     method="auto",
+    checkpoint=None,
+    chunk_cells=256,
 ):
     """The atlas of the stable compass gait over a grid of $\\mu$ and $\\beta$.
 
@@ -100,6 +106,11 @@ def atlas(
     - `psi_start`, `psi_max`, `step`: the slope scan (rad); `tol`: of the flip slopes
       (rad). The gaits at `psi_start` are continued from the default model's (by
       `find_gaits` with `method`, without guesses).
+    - `checkpoint`: a folder, or `None`. Given one, the grid is computed in chunks of
+      whole rows of `mass_ratio` (about `chunk_cells` cells each), each written to the
+      folder as a CSV file when it finishes; the same call again (after Ctrl-C or a
+      killed job, say) reads the finished chunks and computes only the rest. A folder
+      written with other arguments raises `ValueError`.
 
     **Returns:** an `Atlas`.
     """
@@ -123,6 +134,28 @@ def atlas(
         raise ValueError(f"atlas: psi_max must be finite and above psi_start, got {psi_max!r}")
     if slope is not None and not (math.isfinite(slope) and slope > 0):
         raise ValueError(f"atlas: slope must be finite and positive (rad), got {slope!r}")
+    if not (isinstance(chunk_cells, int) and chunk_cells >= 1):
+        raise ValueError(f"atlas: chunk_cells must be a positive integer, got {chunk_cells!r}")
+    settings = dict(
+        slope=slope,
+        mass_leg=mass_leg,
+        leg_length=leg_length,
+        gravity=gravity,
+        psi_start=psi_start,
+        psi_max=psi_max,
+        step=step,
+        tol=tol,
+        method=method,
+    )
+    if checkpoint is not None:
+        return _atlas_in_chunks(mu, beta, checkpoint, chunk_cells, settings)
+    return _atlas(mu, beta, **settings)
+
+
+def _atlas(
+    mu, beta, *, slope, mass_leg, leg_length, gravity, psi_start, psi_max, step, tol, method
+):
+    """`atlas` of checked arguments, in one batch."""
     MU, BETA = np.meshgrid(mu, beta, indexing="ij")
     model = grid_model(
         MU.ravel(),
@@ -164,6 +197,79 @@ def atlas(
         float(psi_start),
         float(psi_max),
         float(step),
+    )
+
+
+#: The columns of an atlas chunk file (slopes in rad; `reason` empty where a flip was found).
+CHUNK_COLUMNS = [
+    "mass_ratio",
+    "length_ratio",
+    "flip_slope",
+    "stable_lo",
+    "stable_hi",
+    "spectral_radius",
+    "reason",
+]
+
+
+def _atlas_in_chunks(mu, beta, checkpoint, chunk_cells, settings):
+    """`atlas` over chunks of whole mass-ratio rows, each read from the checkpoint folder
+    if it holds it complete, else computed and written there."""
+    store = ChunkStore(
+        checkpoint,
+        dict(
+            kind="vhcjax.atlas",
+            mass_ratio=mu.tolist(),
+            length_ratio=beta.tolist(),
+            chunk_cells=chunk_cells,
+            **settings,
+        ),
+    )
+    rows = max(1, chunk_cells // beta.size)
+    cells = []
+    bounds = list(range(0, mu.size, rows))
+    for k, i0 in enumerate(bounds):
+        i1 = min(mu.size, i0 + rows)
+        name = f"cells-{i0:06d}-{i1:06d}.csv"
+        keys = [dict(mass_ratio=m, length_ratio=b) for m in mu[i0:i1] for b in beta]
+        part = store.load(name, CHUNK_COLUMNS, keys)
+        if part is None:
+            at = _atlas(mu[i0:i1], beta, **settings)
+            part = [
+                dict(
+                    key,
+                    flip_slope=f,
+                    stable_lo=lo,
+                    stable_hi=hi,
+                    spectral_radius=r,
+                    reason=why,
+                )
+                for key, f, (lo, hi), r, why in zip(
+                    keys,
+                    at.flip_slope.ravel(),
+                    at.stable_range.reshape(-1, 2),
+                    at.spectral_radius.ravel(),
+                    at.reason,
+                    strict=True,
+                )
+            ]
+            store.save(name, CHUNK_COLUMNS, part)
+            part = store.load(name, CHUNK_COLUMNS, keys)  # as a resumed run reads it
+            assert part is not None, name
+        cells += part
+        report("atlas chunks", k + 1, len(bounds))
+    col = lambda c: np.array([float(x[c]) for x in cells]).reshape(mu.size, beta.size)
+    return Atlas(
+        mu,
+        beta,
+        col("flip_slope"),
+        np.stack([col("stable_lo"), col("stable_hi")], axis=-1),
+        col("spectral_radius"),
+        [x["reason"] for x in cells],
+        None if settings["slope"] is None else float(settings["slope"]),
+        float(settings["psi_start"]),
+        float(settings["psi_max"]),
+        float(settings["step"]),
     )
 
 
