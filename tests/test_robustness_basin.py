@@ -1,6 +1,8 @@
 """Basin of attraction: classification spot-checked by independent long simulations,
 bisection brackets verified by simulation, Wilson interval against known values."""
 
+import csv
+
 import numpy as np
 import pytest
 from _robust import long_walk, returns_to, stable_gait
@@ -97,6 +99,64 @@ def test_max_converging_perturbation_brackets():
         assert not returns_to(bad, x_star, tol=1e-4)
 
 
+def test_a_basin_resumes_from_its_checkpoint(slice8, tmp_path, monkeypatch):
+    """The slice's points with a checkpoint folder, in parts of 24, stopped after the
+    first part: the same call again computes only the other two, and the result equals
+    the slice's; a part cut short is computed again; other inputs are refused."""
+    import vhcjax.robustness._basin as basin
+
+    model = stable_gait()[0]
+    gx, gy = np.meshgrid(slice8.offsets_x, slice8.offsets_y)
+    pts = np.repeat(np.asarray(slice8.z_star)[None], gx.size, 0)
+    pts[:, 0] += gx.ravel()
+    pts[:, 1] += gy.ravel()
+    real, computed, allowed = basin.classify_section_points, [], [1]
+
+    class Stopped(Exception):  # a Ctrl-C or a killed job, as far as the folder can tell
+        pass
+
+    def counted(model, z_star, z, **kwargs):
+        if kwargs.get("checkpoint") is None:  # a part, not the call with the folder
+            if len(computed) == allowed[0]:
+                raise Stopped
+            computed.append(len(z))
+        return real(model, z_star, z, **kwargs)
+
+    monkeypatch.setattr(basin, "classify_section_points", counted)
+    ck = tmp_path / "ck"
+    run = lambda: counted(  # noqa: E731
+        model, slice8.z_star, pts, num_steps=50, chunk=64, checkpoint=ck, chunk_points=24
+    )
+    with pytest.raises(Stopped):
+        run()
+    assert sorted(p.name for p in ck.iterdir()) == [
+        "manifest.json",
+        "points-000000000-000000024.csv",
+    ]
+    allowed[0] = 99
+    computed.clear()
+    out = run()
+    assert computed == [24, 16]
+    for key, ref in (("label", slice8.label), ("steps", slice8.steps), ("result", slice8.result)):
+        np.testing.assert_array_equal(out[key].reshape(8, 8), ref)
+    with open(ck / "points-000000024-000000048.csv", newline="") as fh:
+        part = list(csv.DictReader(fh))
+    assert [int(r["index"]) for r in part] == list(range(24, 48))
+    start = [[float(r[f"z{i}"]) for i in range(3)] for r in part]
+    np.testing.assert_array_equal(start, pts[24:48])  # exact: floats written in full
+    # a part cut short (a copy interrupted, say) is computed again, alone
+    cut = ck / "points-000000024-000000048.csv"
+    cut.write_text(cut.read_text()[:-40])
+    computed.clear()
+    again = run()
+    assert computed == [24]
+    for key in out:
+        np.testing.assert_array_equal(again[key], out[key])
+    # another walker in the same folder: refused, naming what differs
+    with pytest.raises(ValueError, match="other settings .*inputs"):
+        counted(model.with_slope(0.06), slice8.z_star, pts, num_steps=50, checkpoint=ck)
+
+
 def test_wilson_interval():
     lo, hi = wilson_interval(50, 100)
     assert np.isclose(lo, 0.4038, atol=1e-4) and np.isclose(hi, 0.5962, atol=1e-4)
@@ -160,3 +220,27 @@ def test_basin_refuses_a_point_that_is_not_a_gait():
     one = vj.basin_slice(model, z, shape=(1, 1), num_steps=5, chunk=64)
     assert one.offsets_x.tolist() == [0.0] and one.offsets_y.tolist() == [0.0]
     assert one.label.tolist() == [[CONVERGED]]
+
+
+def test_cli_basin_with_a_checkpoint_gives_the_same_json_again(tmp_path, capsys):
+    """`vhcjax basin --checkpoint`: the same JSON as without, again from the folder alone
+    (slice and volume samples in their own parts); another grid there is refused."""
+    import json
+
+    from vhcjax.cli import main
+
+    argv = ["basin", "--grid", "8", "8", "--chunk", "64", "--volume-samples", "64", "--json"]
+    assert main([*argv, "--quiet"]) == 0
+    plain = json.loads(capsys.readouterr().out)
+    ck = tmp_path / "ck"
+    for _ in range(2):
+        assert main([*argv, "--quiet", "--checkpoint", str(ck)]) == 0
+        assert json.loads(capsys.readouterr().out) == plain
+    assert sorted(p.name for p in (ck / "slice").iterdir()) == [
+        "manifest.json",
+        "points-000000000-000000064.csv",
+    ]
+    assert len(list((ck / "volume").iterdir())) == 2
+    assert main(["basin", "--grid", "8", "9", "--quiet", "--checkpoint", str(ck)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "holds a run with other settings" in err and "\n" not in err

@@ -211,6 +211,54 @@ def test_cli_bifurcation_json_and_files(tmp_path, capsys):
     assert_plain_text(text)
     assert "period doubling (a multiplier crossing -1): none in the slopes given" in text
     assert "simulated 6 of 6 slopes (2.75 to 3 deg)" in text and "fell at 0 slopes" in text
+    # with a checkpoint folder: the same JSON, and again from the folder alone
+    ck = tmp_path / "ck"
+    for _ in range(2):
+        assert main([*argv, "--json", "--checkpoint", str(ck)]) == 0
+        assert json.loads(capsys.readouterr().out) == out
+    assert sorted(p.name for p in ck.iterdir()) == [
+        "manifest.json",
+        "slopes-000000000-000000006.csv",
+    ]
+    # another record length there: refused in one line
+    assert main([*argv[:-1], "9", "--checkpoint", str(ck)]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "other settings (num_record)" in err and "\n" not in err
+
+
+@pytest.mark.slow
+def test_a_bifurcation_diagram_resumes_from_its_checkpoint(tmp_path, monkeypatch):
+    """Six slopes in parts of two, stopped after the first part: the same call again
+    computes only the other two parts, and the diagram equals the one-batch diagram."""
+    import vhcjax.stability._bifurcation as bif
+
+    psis = np.radians(np.arange(2.75, 3.01, 0.05))
+    zs = np.asarray(vhcjax.sweep(CompassGait(), psis).gaits.z)
+    kw = dict(num_transient=40, num_record=8)
+    whole = bif.bifurcation_diagram(psis, zs, **kw)
+    real, calls, allowed = bif.padded_map, [], [1]
+
+    class Stopped(Exception):
+        pass
+
+    def counted(fn, ps, *args, **kwargs):
+        if len(calls) == allowed[0]:
+            raise Stopped
+        calls.append(len(ps))
+        return real(fn, ps, *args, **kwargs)
+
+    monkeypatch.setattr(bif, "padded_map", counted)
+    run = lambda: bif.bifurcation_diagram(  # noqa: E731
+        psis, zs, checkpoint=tmp_path / "ck", chunk_slopes=2, **kw
+    )
+    with pytest.raises(Stopped):
+        run()
+    allowed[0] = 99
+    calls.clear()
+    resumed = run()
+    assert calls == [2, 2]
+    for name in ("periods", "fell", "result", "period_pattern"):
+        np.testing.assert_array_equal(getattr(resumed, name), getattr(whole, name))
 
 
 @pytest.mark.slow

@@ -8,8 +8,9 @@ splits it over the devices, with no host round trip inside loops; on a CPU sever
 run at once from host threads (`host_workers`). `find_gaits` pads its batches by the same
 rule, with a chunk size of its own (`max_chunk`).
 
-Several hosts: call `jax.distributed.initialize()` first on each host; `default_mesh()` then
-spans `jax.devices()` (all devices of all hosts) and the same code runs unchanged.
+Several processes (`jax.distributed.initialize()` on each, every one running the same
+program): `padded_map` computes this process's share of the batch on its own devices and
+gathers the shares (`vhcjax._distributed`); meshes span the local devices.
 """
 
 import contextlib
@@ -22,6 +23,9 @@ import jax.numpy as jnp
 import numpy as np
 from jax.sharding import Mesh, NamedSharding, PartitionSpec
 
+from . import _distributed
+from ._host import tracing
+
 
 def bucket_size(n, minimum=8):
     """Padded size of a batch of `n`: the smallest power of two that is at least `n` and
@@ -31,8 +35,8 @@ def bucket_size(n, minimum=8):
 
 
 def default_mesh(devices=None):
-    """A 1-D mesh with axis `"batch"` over `devices` (default: all devices)."""
-    devices = jax.devices() if devices is None else devices
+    """A 1-D mesh with axis `"batch"` over `devices` (default: this process's devices)."""
+    devices = jax.local_devices() if devices is None else devices
     return Mesh(np.asarray(devices), ("batch",))
 
 
@@ -183,10 +187,31 @@ def padded_map(
     `fn` maps arrays with a leading axis of the chunk size to a pytree of arrays with the
     same leading axis (typically a jitted `vmap`).
 
+    With several processes (`vhcjax._distributed`), each computes its contiguous share
+    of the members and every process gets all of them (a traced batch, inside another
+    program, is not split).
+
     **Returns:** the results of the `n` members, concatenated along the batch axis (numpy
     arrays with `to_host=True`: each chunk is fetched to the host and cut there).
     """
     n = jax.tree_util.tree_leaves(args)[0].shape[0]
+    if _distributed.split_is_worth(n) and not tracing(args):
+        i, j, s = _distributed.share(n)
+        own = jax.tree_util.tree_map(
+            lambda a: (
+                np.concatenate([a[i:j], np.repeat(a[i:j][:1], s - (j - i), axis=0)])
+                if j - i
+                else np.repeat(a[:1], s, axis=0)
+            ),
+            jax.device_get(args),
+        )
+        out = _local_map(fn, own, s, max_chunk, mesh, stage, progress, True)
+        return _distributed.gather(out, n, s, to_host)
+    return _local_map(fn, args, n, max_chunk, mesh, stage, progress, to_host)
+
+
+def _local_map(fn, args, n, max_chunk, mesh, stage, progress, to_host):
+    """`padded_map` on this process's devices."""
     size = dispatch_size(n, max_chunk, mesh)
 
     def part(i, j):

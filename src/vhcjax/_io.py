@@ -21,6 +21,10 @@ from typing import NamedTuple, NoReturn
 #: command line calls it when interrupted, so that no partial file is left behind).
 PENDING: set[str] = set()
 
+#: `{"on": True}` in a process that computes but must not write (a process other than 0
+#: of a multi-process command): outputs then go to `os.devnull`.
+DISCARD = {"on": False}
+
 
 class WriteError(OSError):
     """Writing an output failed: an `OSError` (same `errno` and `strerror`) whose
@@ -90,7 +94,11 @@ def atomic_open(path, mode="w", **kwargs):
     the format from the name) and renamed to the file only when the `with` block ends
     without an exception, keeping the permissions of the file it replaces; on an
     exception the partial file is removed and the file is untouched. A pipe, a device or
-    a descriptor is written directly."""
+    a descriptor is written directly. With `DISCARD` on, nothing is written."""
+    if DISCARD["on"]:
+        with open(os.devnull, mode, **kwargs) as fh:
+            yield fh
+        return
     how, where, fd = output_target(path)
     if fd is not None:
         for stream in (sys.stdout, sys.stderr):  # what was printed comes first

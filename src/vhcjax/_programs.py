@@ -422,7 +422,7 @@ class _Program:
         # the wrapper compile again (the program itself wants plain dtypes on one device).
         device = next(
             (next(iter(x.sharding.device_set)) for x in leaves if getattr(x, "committed", False)),
-            jax.devices()[0],
+            jax.local_devices()[0],
         )
         return [jax.device_put(_plain(x), device) for x in leaves]
 

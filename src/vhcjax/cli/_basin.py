@@ -87,6 +87,12 @@ def register(subparsers):
         help="half widths of the 3-D box (q1 in rad, dq1 and dq2 in rad/s; default 0.05, "
         "0.2, 0.5 for the thesis's walker, the rates scaled with the walker's time unit)",
     )
+    p.add_argument(
+        "--checkpoint",
+        metavar="FOLDER",
+        help="write the points to FOLDER in parts as they finish (CSV files); the same "
+        "command run again, after an interruption, computes only the parts not there",
+    )
     p.set_defaults(func=run_basin)
 
 
@@ -130,7 +136,8 @@ def run_basin(args):
         q, dq1, dq2 = BOX
         rate = lambda v: in_walker_units(model, v, "rate")  # noqa: E731
         args.box = [q, rate(dq1), rate(dq2)]
-    b = basin_slice(
+    b = _resumable(
+        basin_slice,
         model,
         z,
         axes=axes,
@@ -140,6 +147,7 @@ def run_basin(args):
         tol=args.tol,
         chunk=args.chunk,
         progress=progress_bar(args),
+        checkpoint=_part(args, "slice"),
     )
     counts = {
         n: int(np.sum(b.label == i))
@@ -170,7 +178,8 @@ def run_basin(args):
         "converging only where they land on its stable manifold within --tol",
     )
     if args.volume_samples > 0:
-        v = basin_volume(
+        v = _resumable(
+            basin_volume,
             model,
             z,
             args.box,
@@ -179,6 +188,7 @@ def run_basin(args):
             num_steps=args.steps,
             chunk=args.chunk,
             progress=progress_bar(args),
+            checkpoint=_part(args, "volume"),
         )
         out["volume"] = {
             "box_half_widths": args.box,
@@ -197,6 +207,23 @@ def run_basin(args):
         print_json(out)
     else:
         _print_basin(args, out)
+
+
+def _resumable(fn, *args, **kwargs):
+    """`fn(*args, **kwargs)`, a checkpoint folder that cannot be used being bad input."""
+    from .._chunks import CheckpointError
+
+    try:
+        return fn(*args, **kwargs)
+    except CheckpointError as e:
+        raise CLIError(str(e)) from None
+
+
+def _part(args, name):
+    """The checkpoint folder of the slice or the volume samples (`None` without one)."""
+    import os
+
+    return None if args.checkpoint is None else os.path.join(args.checkpoint, name)
 
 
 #: Units of the section coordinates.

@@ -72,6 +72,13 @@ def register(subparsers):
         help="save |multipliers| of the period-1 family against slope",
     )
     p.add_argument("--json", action="store_true", help="print a JSON summary")
+    p.add_argument(
+        "--checkpoint",
+        metavar="FOLDER",
+        help="write the long simulations to FOLDER in parts as they finish (CSV files); "
+        "the same command run again, after an interruption, computes only the parts "
+        "not there",
+    )
     p.set_defaults(func=run_bifurcation)
 
     q = subparsers.add_parser(
@@ -219,13 +226,19 @@ def run_bifurcation(args):
     # simulated from the period-1 gait, where there is one
     sim = np.flatnonzero(ok1)
     sim_slopes = [slopes[i] for i in sim]
-    diag = S.bifurcation_diagram(
-        psis[sim],
-        np.asarray(fam.z)[sim],
-        model=model,
-        num_transient=args.transient,
-        num_record=args.record,
-    )
+    from .._chunks import CheckpointError
+
+    try:
+        diag = S.bifurcation_diagram(
+            psis[sim],
+            np.asarray(fam.z)[sim],
+            model=model,
+            num_transient=args.transient,
+            num_record=args.record,
+            checkpoint=args.checkpoint,
+        )
+    except CheckpointError as e:
+        raise CLIError(str(e)) from None
     bar.update(1)
     bar.close()
     family_names = result_names(fam.result)

@@ -21,6 +21,7 @@ from ._common import (
     ComputationFailed,
     Parser,
     check_distinct_outputs,
+    count,
     one_line,
     shown_path,
 )
@@ -50,9 +51,26 @@ def build_parser():
     sub = parser.add_subparsers(dest="command", required=True)
     for name in SUBCOMMANDS:
         importlib.import_module(f"vhcjax.cli.{name}").register(sub)
-    for command in sub.choices.values():  # one --quiet, the same for every command
+    for command in sub.choices.values():  # the same options for every command
         command.add_argument(
             "--quiet", action="store_true", help="no progress bars or notes on stderr"
+        )
+        group = command.add_argument_group(
+            "several processes",
+            "one job over several processes (JAX's distributed runtime), each computing "
+            "its share of every batch; under srun or mpirun the launcher's values are used",
+        )
+        group.add_argument(
+            "--coordinator", metavar="HOST:PORT", help="the address of process 0's coordinator"
+        )
+        group.add_argument(
+            "--num-processes", type=count(1, 100_000), metavar="N", help="processes in the job"
+        )
+        group.add_argument(
+            "--process-id",
+            type=count(0, 99_999),
+            metavar="I",
+            help="this process's index, 0..N-1",
         )
     return parser
 
@@ -134,6 +152,17 @@ def run_command(args):
     named by a note on stderr (`vhcjax._programs.notes_to`)."""
     from .._programs import notes_to
 
+    prefix = f"vhcjax {args.command}:"
+    try:
+        main_process = _join_processes(args)
+    except CLIError as e:
+        print(f"{prefix} error: {one_line(e)}", file=sys.stderr)
+        return 2
+    except Exception as e:  # the coordinator unreachable, a process missing: one line
+        print(f"{prefix} cannot join the processes: {one_line(e)}", file=sys.stderr)
+        return 1
+    if not main_process:
+        return _run_as_worker(args)
     QUIET["on"] = bool(getattr(args, "quiet", False))
     notes = contextlib.nullcontext() if QUIET["on"] else notes_to(_note_writer(args.command))
     stdout = sys.stdout
@@ -143,6 +172,47 @@ def run_command(args):
             warnings.showwarning = _one_line_warning(args.command)
             return _run(args)
     finally:
+        sys.stdout = stdout
+
+
+def _join_processes(args):
+    """Join the job's other processes (`vhcjax._distributed.initialize`) when the options
+    or a launcher say there are some; **returns** whether this process prints and writes
+    (process 0, or the only one)."""
+    from .. import _distributed
+
+    given = [getattr(args, k, None) for k in ("coordinator", "num_processes", "process_id")]
+    if all(v is None for v in given) and _distributed.launched_processes() == 1:
+        return True
+    coordinator, num, pid = given
+    if num is not None and pid is not None and pid >= num:
+        raise CLIError(f"--process-id must be below --num-processes ({num}), got {pid}")
+    if (coordinator is None or num is None or pid is None) and (
+        _distributed.launched_processes() == 1
+    ):
+        raise CLIError(
+            "without a launcher (srun, mpirun), give --coordinator, --num-processes and "
+            "--process-id together"
+        )
+    _distributed.initialize(coordinator, num, pid)
+    return _distributed.is_main()
+
+
+def _run_as_worker(args):
+    """Run the command as a process other than 0 of a job: the same computation (its
+    share of each batch), with nothing printed or written; its exit status."""
+    from .. import _io
+
+    QUIET["on"] = True
+    _io.DISCARD["on"] = True
+    stdout = sys.stdout
+    sys.stdout = open(os.devnull, "w")  # noqa: SIM115 (closed below)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            return _run(args)
+    finally:
+        sys.stdout.close()
         sys.stdout = stdout
 
 

@@ -253,9 +253,7 @@ def _atlas_in_chunks(mu, beta, checkpoint, chunk_cells, settings):
                     strict=True,
                 )
             ]
-            store.save(name, CHUNK_COLUMNS, part)
-            part = store.load(name, CHUNK_COLUMNS, keys)  # as a resumed run reads it
-            assert part is not None, name
+            store.save(name, CHUNK_COLUMNS, part)  # floats in `repr`: read back exactly
         cells += part
         report("atlas chunks", k + 1, len(bounds))
     col = lambda c: np.array([float(x[c]) for x in cells]).reshape(mu.size, beta.size)

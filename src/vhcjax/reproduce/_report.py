@@ -321,7 +321,7 @@ def _write(out_dir, sections, mode, total):
         version = importlib.metadata.version("vhcjax")
     except importlib.metadata.PackageNotFoundError:
         version = "unknown"
-    dev = jax.devices()[0]
+    dev = jax.local_devices()[0]
     device = f"{dev.platform} ({getattr(dev, 'device_kind', '')}), {jax.device_count()} device(s)"
     counts = {}
     for s in sections:

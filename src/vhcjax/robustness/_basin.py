@@ -18,6 +18,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import MAX_DISPATCH, host_workers, padded_map
+from .._chunks import ChunkStore, column, fingerprint
 from .._host import host_only
 from .._programs import stored_jit
 from .._results import result_codes
@@ -55,19 +56,41 @@ def classify_section_points(
     config=BASIN_CONFIG,
     progress=None,
     mesh=None,
+    checkpoint=None,
+    chunk_points=4096,
 ):
     """Classify section points `z` (shape `(N, 2n-1)`) by their fate.
 
     The points run in chunks of at most `chunk` (`_batching.padded_map`: padded to a
     power of two and a multiple of the device count, split over the devices of `mesh`,
-    default all local devices, so the same call uses every GPU of a machine, or of several
-    hosts after `jax.distributed.initialize()`; on a CPU one chunk per core at a time, of
-    at most `_batching.MAX_DISPATCH` points).
+    default this process's devices, so the same call uses every GPU of a machine, and
+    each process its share after `jax.distributed.initialize()`; on a CPU one chunk per
+    core at a time, of at most `_batching.MAX_DISPATCH` points).
     `progress` optionally wraps the list of chunks (a progress bar).
+
+    `checkpoint`: a folder, or `None`. Given one, the points run in parts of
+    `chunk_points`, each written to the folder as a CSV file when it finishes (a row per
+    point: its index, start and final section coordinates, label, steps, period, result
+    code); the same call again reads the finished parts and computes only the rest. A
+    folder written for other inputs raises `ValueError`.
 
     **Returns:** dict of numpy arrays: `label`, `steps`, `period`, `result` (integer
     `RESULTS` codes), `z_final`.
     """
+    if checkpoint is not None:
+        return _classify_in_chunks(
+            model,
+            z_star,
+            z,
+            num_steps,
+            tol,
+            chunk,
+            config,
+            progress,
+            mesh,
+            checkpoint,
+            chunk_points,
+        )
     z_star = jnp.asarray(z_star, float)
     if host_workers(mesh) > 1:
         # Chunks run concurrently on a CPU, and two concurrent dispatches of this program
@@ -82,6 +105,69 @@ def classify_section_points(
         progress=progress,
     )
     return {k: np.asarray(v) for k, v in jax.device_get(rec).items()}
+
+
+def _classify_in_chunks(
+    model, z_star, z, num_steps, tol, chunk, config, progress, mesh, checkpoint, chunk_points
+):
+    """`classify_section_points` in parts of `chunk_points`, each read from the
+    checkpoint folder if it holds it complete, else computed and written there."""
+    if not (isinstance(chunk_points, int) and chunk_points >= 1):
+        raise ValueError(f"chunk_points must be a positive integer, got {chunk_points!r}")
+    z = np.asarray(z, dtype=float)
+    z_star = np.asarray(z_star, dtype=float)
+    n, k = z.shape
+    store = ChunkStore(
+        checkpoint,
+        dict(
+            kind="vhcjax.basin",
+            model=type(model).__name__,
+            inputs=fingerprint((model, config)),
+            points_digest=fingerprint((z_star, z), rounded=True),
+            points=n,
+            num_steps=int(num_steps),
+            tol=float(tol),
+            chunk_points=chunk_points,
+        ),
+    )
+    start = [f"z{i}" for i in range(k)]
+    final = [f"z_final{i}" for i in range(k)]
+
+    def keys(i, j):
+        return [dict(index=float(m)) for m in range(i, j)]
+
+    def compute(i, j):
+        out = classify_section_points(
+            model,
+            z_star,
+            z[i:j],
+            num_steps=num_steps,
+            tol=tol,
+            chunk=chunk,
+            config=config,
+            mesh=mesh,
+        )
+        ints = {c: out[c].astype(int) for c in ("label", "steps", "result")}
+        return [
+            dict(
+                index=i + m,
+                **dict(zip(start, map(float, z[i + m]), strict=True)),
+                period=float(out["period"][m]),
+                **{c: int(v[m]) for c, v in ints.items()},
+                **dict(zip(final, map(float, out["z_final"][m]), strict=True)),
+            )
+            for m in range(j - i)
+        ]
+
+    columns = ["index", *start, "label", "steps", "period", "result", *final]
+    rows = store.rows(n, chunk_points, "points", columns, keys, compute, progress)
+    return {
+        "label": column(rows, "label", int),
+        "steps": column(rows, "steps", int),
+        "period": column(rows, "period"),
+        "result": column(rows, "result", int),
+        "z_final": np.stack([column(rows, c) for c in final], axis=-1),
+    }
 
 
 class BasinSlice(eqx.Module):
@@ -140,6 +226,7 @@ def basin_slice(
     config=BASIN_CONFIG,
     progress=None,
     mesh=None,
+    checkpoint=None,
 ):
     """Classify a `shape = (nx, ny)` grid of perturbations of `z_star` along two section
     coordinates (`axes`), the others nominal.
@@ -159,6 +246,9 @@ def basin_slice(
     - `chunk`: batch size of one compiled call.
     - `config`: swing integration (default `BASIN_CONFIG`, tolerances 1e-8).
     - `progress`: optional wrapper of an iterable (progress bar over chunks).
+    - `checkpoint`: a folder, or `None`: the points are written there in parts of 4,096
+      as they finish (CSV files), and the same call again computes only the missing
+      parts; a folder written for other inputs raises `ValueError`.
 
     **Returns:** a `BasinSlice`. A `z_star` that one step does not return to
     (`GAIT_TOL`) raises a `ValueError`.
@@ -196,6 +286,7 @@ def basin_slice(
         config=config,
         progress=progress,
         mesh=mesh,
+        checkpoint=checkpoint,
     )
     label = out["label"].reshape(ny, nx)
     conv = label == CONVERGED
@@ -319,10 +410,12 @@ def basin_volume(
     confidence=0.95,
     progress=None,
     mesh=None,
+    checkpoint=None,
 ):
     """Monte-Carlo estimate (uniform samples) of the fraction of the box
     `z_star +- half_widths` in the full section that converges to the gait, with a Wilson
-    confidence interval.
+    confidence interval. `checkpoint`: a folder where the samples are written in parts as
+    they finish, from which the same call resumes (as in `basin_slice`), or `None`.
 
     **Returns:** a `BasinVolume`. A `z_star` that one step does not return to
     (`GAIT_TOL`) raises a `ValueError`.
@@ -352,6 +445,7 @@ def basin_volume(
         config=config,
         progress=progress,
         mesh=mesh,
+        checkpoint=checkpoint,
     )
     k = int(np.sum(out["label"] == CONVERGED))
     lo, hi = wilson_interval(k, num_samples, confidence)

@@ -8,6 +8,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._batching import MAX_DISPATCH, host_workers, padded_map
+from .._chunks import ChunkStore, column, fingerprint
 from .._host import host_only
 from .._programs import stored_jit
 from .._results import RESULTS, result_codes
@@ -57,6 +58,8 @@ def bifurcation_diagram(
     config=FAST_CONFIG,
     chunk=None,
     mesh=None,
+    checkpoint=None,
+    chunk_slopes=256,
 ):
     """Simulate from the period-1 gaits `zs` at slopes `psis` (rad) for
     `num_transient + num_record` steps (batched with `vmap`) and keep the step periods
@@ -70,7 +73,13 @@ def bifurcation_diagram(
     (rtol = atol = 1e-8). `chunk`: largest batch of one call (default: 256 when the
     chunks run one per CPU core at a time, else the whole batch). The chunks are padded
     to a power of two (nearby sizes share one compiled program) and split over the devices
-    of `mesh` (default: all local devices).
+    of `mesh` (default: this process's devices).
+
+    `checkpoint`: a folder, or `None`. Given one, the slopes run in parts of
+    `chunk_slopes`, each written to the folder as a CSV file when it finishes (a row per
+    slope: slope, result code, the recorded step periods); the same call again reads the
+    finished parts and computes only the rest. A folder written for other inputs raises
+    `ValueError`.
     """
     model = CompassGait() if model is None else model
     psis = np.asarray(psis, float).reshape(-1)
@@ -91,16 +100,57 @@ def bifurcation_diagram(
     time_unit = float(model.time_scale)
     x0s[:, -1] += perturbation / time_unit
     steps = num_transient + num_record
-    p, r = padded_map(
-        lambda ps, xs: _long_runs(model, ps, xs, steps, num_record, config),
-        psis,
-        x0s,
-        # chunks of up to 256 run one per CPU core; a GPU takes the whole batch at once
-        max_chunk=chunk or (MAX_DISPATCH if host_workers(mesh) > 1 else len(psis)),
-        mesh=mesh,
-        stage="simulation",
-    )
-    periods, codes = np.asarray(p), np.asarray(result_codes(r))
+
+    def run(i, j):
+        p, r = padded_map(
+            lambda ps, xs: _long_runs(model, ps, xs, steps, num_record, config),
+            psis[i:j],
+            x0s[i:j],
+            # chunks of up to 256 run one per CPU core; a GPU takes the whole batch at once
+            max_chunk=chunk or (MAX_DISPATCH if host_workers(mesh) > 1 else j - i),
+            mesh=mesh,
+            stage="simulation",
+        )
+        return np.asarray(p), np.asarray(result_codes(r))
+
+    if checkpoint is None:
+        periods, codes = run(0, len(psis))
+    else:
+        if not (isinstance(chunk_slopes, int) and chunk_slopes >= 1):
+            raise ValueError(f"chunk_slopes must be a positive integer, got {chunk_slopes!r}")
+        store = ChunkStore(
+            checkpoint,
+            dict(
+                kind="vhcjax.bifurcation",
+                model=type(model).__name__,
+                inputs=fingerprint((model, config)),
+                gaits_digest=fingerprint(zs, rounded=True),
+                slopes=len(psis),
+                num_transient=int(num_transient),
+                num_record=int(num_record),
+                perturbation=float(perturbation),
+                chunk_slopes=chunk_slopes,
+            ),
+        )
+        recorded = [f"period{k}" for k in range(num_record)]
+
+        def compute(i, j):
+            p, c = run(i, j)
+            return [
+                dict(psi=psis[m], result=int(c[m - i]), **dict(zip(recorded, map(float, p[m - i]))))
+                for m in range(i, j)
+            ]
+
+        rows = store.rows(
+            len(psis),
+            chunk_slopes,
+            "slopes",
+            ["psi", "result", *recorded],
+            lambda i, j: [dict(psi=psis[m]) for m in range(i, j)],
+            compute,
+        )
+        periods = np.stack([column(rows, c) for c in recorded], axis=-1)
+        codes = column(rows, "result", int)
     fell = codes != int(result_codes(RESULTS.successful))
     tol = period_tol * time_unit
     nd = np.array([-1 if f else detect_period(pp, tol) for pp, f in zip(periods, fell)])
