@@ -95,6 +95,24 @@ def initialize(coordinator=None, num_processes=None, process_id=None):
     jax.distributed.initialize(
         coordinator_address=coordinator, num_processes=num_processes, process_id=process_id
     )
+    connect()
+
+
+def connect():
+    """Open the connections between the processes now, with the collective library's
+    note on them ("[Gloo] Rank 0 is connected to 1 peer ranks...", which it prints to
+    standard output) sent to standard error, so that standard output holds only what a
+    command prints (its JSON, say)."""
+    import sys
+
+    sys.stdout.flush()
+    saved = os.dup(1)
+    try:
+        os.dup2(2, 1)
+        agree(True)
+    finally:
+        os.dup2(saved, 1)
+        os.close(saved)
 
 
 def split_is_worth(n):
