@@ -7,7 +7,9 @@ split over N CPU devices, one per core, by `jax.sharding`); the baseline
 numpy impact map) loops over walkers and
 steps in Python, at the same rtol/atol, on a subset of the walkers (its cost is linear in
 the number of walker-steps). Compile time is reported separately from run time (best of
-`--repeats`). Both must agree on the step periods.
+`--repeats`). Both must agree on the step periods. The floating-point work of a
+walker-step and the share of the CPU's peak rate it reaches are counted as in
+`roofline.py` (right-hand side only: a lower bound).
 
     python benchmarks/bench_simulate.py [--solver dopri8] [--cpu-devices 2] [--trig plain]
         [--quick] [--json OUT]
@@ -27,6 +29,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+import roofline  # noqa: E402
 import scipy_reference as ref  # noqa: E402
 
 
@@ -100,6 +103,12 @@ def main(argv=None):
     walker_steps = int(ok.sum())
     jax_rate = walker_steps / run_s
 
+    # the floating-point work: right-hand-side flops x evaluations per walker-step
+    rhs_flops = roofline.rhs_flops(model)
+    evals = roofline.rhs_evaluations(model, X[:64], min(args.steps, 5), config)
+    rhs_gflops = jax_rate * evals * rhs_flops / 1e9
+    peak = roofline.cpu_peak_gflops() if jax.default_backend() == "cpu" else None
+
     par = ref.Params(psi=psi)
     nsc = min(args.scipy_walkers, args.walkers)
     t = time.perf_counter()
@@ -138,6 +147,11 @@ def main(argv=None):
         "scipy_walker_steps_per_s": sc_rate,
         "speedup": jax_rate / sc_rate,
         "max_period_difference_s": max_dT,
+        "rhs_flops": rhs_flops,
+        "rhs_evaluations_per_walker_step": evals,
+        "rhs_gflops": rhs_gflops,
+        "peak_gflops": peak,
+        "fraction_of_peak": None if peak is None else rhs_gflops / peak,
     }
     print(
         f"vhcjax  {args.walkers} walkers x {args.steps} steps on {len(jax.devices())} "
@@ -150,6 +164,11 @@ def main(argv=None):
         f"{sc_rate:,.0f} walker-steps/s"
     )
     print(f"speedup {res['speedup']:.1f}x   max |period difference| {max_dT:.2e} s")
+    share = "-" if peak is None else f"{rhs_gflops / peak:.1%} of the CPU's {peak:.0f} GFLOP/s"
+    print(
+        f"work    {evals:.0f} right-hand-side evaluations per walker-step x {rhs_flops:.0f} "
+        f"flops = {rhs_gflops:.2f} GFLOP/s ({share})"
+    )
     if args.json:
         with open(args.json, "w") as f:
             json.dump(res, f, indent=2)

@@ -90,8 +90,21 @@ def _fmt(x):
     return f"{x:.3g}"
 
 
+def _peak(res):
+    """The share of the CPU's peak double-precision rate that a simulation reached
+    (right-hand-side work only, `roofline.py`)."""
+    if res.get("fraction_of_peak") is None:
+        return "-"
+    return (
+        f"{res['fraction_of_peak']:.1%} ({res['rhs_evaluations_per_walker_step']:.0f} "
+        f"evaluations x {res['rhs_flops']:.0f} flops per walker-step; peak "
+        f"{res['peak_gflops']:.0f} GFLOP/s)"
+    )
+
+
 def _rows(name, res):
-    """Table rows (job, vhcjax, scipy, ratio, compile) from one script's JSON."""
+    """Table rows (job, vhcjax, scipy, ratio, compile, share of peak) from one script's
+    JSON; rows without a flop count get "-" in the last column (added below)."""
     if name.startswith("simulate"):
         tol = f"{res['rtol']:g}".replace("e-0", "e-")
         job = (
@@ -106,6 +119,7 @@ def _rows(name, res):
                 (f"{_fmt(res['scipy_walker_steps_per_s'])} walker-steps/s ({res['scipy_method']})"),
                 f"{res['speedup']:.1f}x",
                 f"{res['compile_s']:.1f} s",
+                _peak(res),
             )
         ]
     if name == "gait_search":
@@ -272,12 +286,13 @@ def main(argv=None):
         )
         if res is None:
             failed.append(name)
-            rows.append((f"{name} ({script})", "failed", "-", "-", "-"))
+            rows.append((f"{name} ({script})", "failed", "-", "-", "-", "-"))
         else:
             rows.extend(_rows(name, res))
     total = time.perf_counter() - total
+    rows = [r if len(r) == 6 else (*r, "-") for r in rows]
 
-    header = ("job", "vhcjax", "scipy, same job", "ratio", "vhcjax compile")
+    header = ("job", "vhcjax", "scipy, same job", "ratio", "vhcjax compile", "share of peak")
     line = (
         f"Machine: {machine['cpu']}, {machine['cores']} cores; Python {machine['python']}, "
         f"JAX {machine.get('jax', '?')}, backend {machine.get('backend', '?')} "
