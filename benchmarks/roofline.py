@@ -7,7 +7,8 @@
   subclass of the model (under `vmap` a member that has finished its step still
   evaluates while the others go on: executed work, which is what the hardware does).
 - `cpu_peak_gflops()`: cores x clock x double-precision flops per cycle (16 with AVX2 and
-  FMA, 32 with AVX-512), from `/proc/cpuinfo`; `None` where it cannot be read.
+  FMA, 32 with AVX-512), from `/proc/cpuinfo`; `None` where it cannot be read. A
+  processor that splits 512-bit operations in two peaks at half of it: an upper bound.
 
 The achieved rate counts the right-hand side only (event location, the impact map and the
 solver's own arithmetic come on top), so the fraction of peak it gives is a lower bound.
