@@ -90,8 +90,8 @@ def host_workers(mesh=None):
     devices = (default_mesh() if mesh is None else mesh).devices.ravel()
     if any(d.platform != "cpu" for d in devices):
         return 1
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return max(1, (cores or 1) // devices.size)
+    # several processes: the fewest cores of any, so that all cut their batches alike
+    return max(1, _distributed.common_cores() // devices.size)
 
 
 _PROGRESS = contextvars.ContextVar("vhcjax_progress", default=None)
@@ -205,7 +205,9 @@ def padded_map(
             ),
             jax.device_get(args),
         )
-        out = _local_map(fn, own, s, max_chunk, mesh, stage, progress, True)
+        # chunks sized for the share, one per core at least (the caller sized them for n)
+        local = min(max_chunk, bucket_size(-(-s // host_workers(mesh))))
+        out = _local_map(fn, own, s, local, mesh, stage, progress, True)
         return _distributed.gather(out, n, s, to_host)
     return _local_map(fn, args, n, max_chunk, mesh, stage, progress, to_host)
 

@@ -127,14 +127,21 @@ class ChunkStore:
 
     def save(self, name, columns, rows):
         """Write chunk `name` (rows: dicts over `columns`; floats in full precision); only
-        process 0 writes."""
-        if not is_main():
-            return
-        with atomic_open(self.path(name), "w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(columns)
-            for r in rows:
-                w.writerow([_cell(r[c]) for c in columns])
+        process 0 writes, and a failure to write stops every process."""
+        error = None
+        if is_main():
+            try:
+                with atomic_open(self.path(name), "w", newline="") as fh:
+                    w = csv.writer(fh)
+                    w.writerow(columns)
+                    for r in rows:
+                        w.writerow([_cell(r[c]) for c in columns])
+            except OSError as e:
+                error = e
+        if not agree(error is None):
+            if error is not None:
+                raise error
+            raise CheckpointError(f"checkpoint {self.folder!r}: process 0 could not write {name}")
 
     def rows(self, n, size, stem, columns, keys, compute, progress=None):
         """All `n` rows of a run, in parts of `size` rows (`[i, j)`, in order): each part

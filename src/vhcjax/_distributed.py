@@ -90,7 +90,7 @@ def initialize(coordinator=None, num_processes=None, process_id=None):
     if process_id is not None and num_processes is not None:
         if not (isinstance(process_id, int) and 0 <= process_id < num_processes):
             raise ValueError(f"process_id must be in 0..{num_processes - 1}, got {process_id!r}")
-    if num_processes == 1:
+    if num_processes == 1 or jax.distributed.is_initialized():
         return
     jax.distributed.initialize(
         coordinator_address=coordinator, num_processes=num_processes, process_id=process_id
@@ -98,21 +98,42 @@ def initialize(coordinator=None, num_processes=None, process_id=None):
     connect()
 
 
+#: The fewest CPU cores of any process of the job (`connect`), or `None` before.
+COMMON = {"cores": None}
+
+
+def local_cores():
+    """The CPU cores this process may run on."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+
+
+def common_cores():
+    """The fewest CPU cores of any process of the job (this process's alone without the
+    distributed runtime): every process then cuts its batches alike, and makes the same
+    decisions and collective calls."""
+    if jax.process_count() == 1 or COMMON["cores"] is None:
+        return local_cores() or 1
+    return COMMON["cores"]
+
+
 def connect():
     """Open the connections between the processes now, with the collective library's
     note on them ("[Gloo] Rank 0 is connected to 1 peer ranks...", which it prints to
     standard output) sent to standard error, so that standard output holds only what a
-    command prints (its JSON, say)."""
+    command prints (its JSON, say); and agree on the core count (`common_cores`)."""
     import sys
+
+    from jax.experimental import multihost_utils
 
     sys.stdout.flush()
     saved = os.dup(1)
     try:
         os.dup2(2, 1)
-        agree(True)
+        cores = multihost_utils.process_allgather(np.asarray(local_cores() or 1))
     finally:
         os.dup2(saved, 1)
         os.close(saved)
+    COMMON["cores"] = int(np.min(cores))
 
 
 def split_is_worth(n):

@@ -214,6 +214,7 @@ def _run_as_worker(args):
     finally:
         sys.stdout.close()
         sys.stdout = stdout
+        _io.DISCARD["on"] = False
 
 
 def main(argv=None):

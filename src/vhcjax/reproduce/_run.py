@@ -5,7 +5,7 @@ import os
 import time
 from typing import Any
 
-from .._io import pending_folder
+from .._io import DISCARD, pending_folder
 from ._report import Section, _write
 from ._sections import SECTIONS, Run
 
@@ -85,6 +85,7 @@ def reproduce(out_dir, quick=False, progress=None, method="auto"):
         # the figures first, the report last: a report names only figures already there
         last = ("results.json", "report.md")
         names = sorted(set(os.listdir(work)) - set(last)) + list(last)
-        for name in names:
-            os.replace(os.path.join(work, name), os.path.join(out_dir, name))
+        if not DISCARD["on"]:  # a process other than 0 of a job writes nothing
+            for name in names:
+                os.replace(os.path.join(work, name), os.path.join(out_dir, name))
         return results
