@@ -99,7 +99,7 @@ def initialize(coordinator=None, num_processes=None, process_id=None):
 
 
 #: The fewest CPU cores of any process of the job (`connect`), or `None` before.
-COMMON = {"cores": None}
+COMMON: dict[str, int | None] = {"cores": None}
 
 
 def local_cores():
