@@ -131,6 +131,50 @@ def test_a_failing_member_does_not_sink_the_batch():
     np.testing.assert_allclose(gaits.x_plus[0], search(jnp.asarray(0.03)).x_plus, atol=1e-12)
 
 
+def _on_gait(psi):
+    """The rod walker at slope `psi` and its gait at 0.03 rad (held fixed)."""
+    z = _gait_z()
+    m = RodWalker(psi=psi)
+    return m, z, m.section_to_state(z)
+
+
+def _recovered(psi):
+    m, _, x = _on_gait(psi)
+    return vj.recover(m, x[None] + 1e-3, x, 3, stop_when_converged=False).x_final[0, 2]
+
+
+def _sensitivity(psi):  # the floor-step model of this study is the compass gait's
+    x = vj.find_gait(vj.CompassGait()).x_plus  # its gait at 3 deg (held fixed)
+    return vj.gait_sensitivity_norm(vj.CompassGait(psi=psi), x, 3).norm
+
+
+#: Scalar functions of the slope through the simulations and single-gait studies whose
+#: event-located steps are loops reverse mode cannot enter: each gets its derivatives
+#: from a forward-mode Jacobian (`linearised`).
+THROUGH_STEPS = {
+    "simulate": lambda psi: vj.simulate(_on_gait(psi)[0], _on_gait(psi)[2], 2).steps.x_plus[-1, 2],
+    "simulate_batch": lambda psi: vj.simulate_batch(
+        _on_gait(psi)[0], _on_gait(psi)[2][None] + jnp.array([[0.0], [1e-3]]), 2
+    ).steps.period.sum(),
+    "midswing_multipliers": lambda psi: jnp.abs(
+        vj.midswing_multipliers(_on_gait(psi)[0], _on_gait(psi)[1])[0][0]
+    ),
+    "recover": _recovered,
+    "gait_sensitivity_norm": _sensitivity,
+}
+
+
+@pytest.mark.parametrize("name", sorted(THROUGH_STEPS))
+def test_reverse_and_forward_derivatives_through_steps(name):
+    """`jax.grad` and `jax.jacfwd` agree (to rounding) and equal central differences."""
+    f = THROUGH_STEPS[name]
+    psi, h = jnp.asarray(0.03), 1e-5
+    reverse = float(jax.grad(f)(psi))
+    np.testing.assert_allclose(float(jax.jacfwd(f)(psi)), reverse, rtol=1e-10, atol=1e-14)
+    fd = (float(f(psi + h)) - float(f(psi - h))) / (2 * h)
+    np.testing.assert_allclose(reverse, fd, rtol=1e-5, atol=1e-8)
+
+
 HOST_SIDE = [
     "atlas",
     "basin_slice",
@@ -147,6 +191,7 @@ HOST_SIDE = [
     "max_push",
     "period1_family",
     "period2_branch",
+    "period_k_orbit",
     "period_doubling_slope",
     "slope_sensitivity",
     "sweep",

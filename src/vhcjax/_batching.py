@@ -189,12 +189,15 @@ def padded_map(
 
     With several processes (`vhcjax._distributed`), each computes its contiguous share
     of the members and every process gets all of them (a traced batch, inside another
-    program, is not split).
+    program, is not split). Inside a trace (`jit`, `vmap`, a derivative) the batch is one
+    call of `fn`: the trace is the caller's program, and host threads would leak it.
 
     **Returns:** the results of the `n` members, concatenated along the batch axis (numpy
     arrays with `to_host=True`: each chunk is fetched to the host and cut there).
     """
     n = jax.tree_util.tree_leaves(args)[0].shape[0]
+    if tracing(args):
+        return fn(*args)
     if _distributed.split_is_worth(n) and not tracing(args):
         i, j, s = _distributed.share(n)
         own = jax.tree_util.tree_map(

@@ -28,6 +28,7 @@ from ..hybrid import (
     multidomain_step,
     step_unchecked,
 )
+from ..solvers import linearised
 
 
 def input_matrix(model, q):
@@ -206,12 +207,17 @@ def simulate_closed_loop(
     - `config`: a `SolverConfig`.
     - `torque_points`: samples per step for the torque statistics (0: skip them).
 
-    **Returns:** a `ClosedLoopSimulation`.
+    **Returns:** a `ClosedLoopSimulation`, differentiable in forward and reverse mode
+    (`jax.grad`) in `model`, `x0` and `feedback` (a forward-mode Jacobian through the
+    heel strikes times the tangents).
     """
     x0 = jnp.asarray(x0, float)
     check_state_shape(model, x0)
     check_num_steps(num_steps)
+    return linearised(_simulate_closed_loop, num_steps, config, torque_points)(model, x0, feedback)
 
+
+def _simulate_closed_loop(model, x0, feedback, num_steps, config, torque_points):
     def body(carry, _):
         x, alive, first_fail = carry
         if torque_points:

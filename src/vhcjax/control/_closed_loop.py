@@ -31,6 +31,7 @@ from ..hybrid import (
 )
 from ..hybrid._simulate import section_units
 from ..robustness import direction, finish_step, impulse_velocity_jump, push_bound, swing_from
+from ..solvers import eigenvalues, linearised
 from ._actuated import (
     closed_loop_field,
     closed_loop_step,
@@ -121,14 +122,24 @@ def closed_loop_step_map(model, feedback, z, config=DEFAULT_CONFIG):
     return model.state_to_section(sr.x_plus), sr.result
 
 
-def closed_loop_jacobian(model, feedback, z, config=TIGHT_CONFIG):
-    """Jacobian of `closed_loop_step_map` by forward-mode autodiff through the event."""
+@stored_jit
+def _closed_loop_jacobian(model, feedback, z, config):
     return jax.jacfwd(lambda zz: closed_loop_step_map(model, feedback, zz, config)[0])(z)
 
 
+def closed_loop_jacobian(model, feedback, z, config=TIGHT_CONFIG):
+    """Jacobian of `closed_loop_step_map` by forward-mode autodiff through the event (one
+    stored program). Differentiable in forward and reverse mode (`jax.grad`): its own
+    derivatives come from a forward-mode Jacobian times the tangents."""
+    z = jnp.asarray(z, float)
+    check_section_shape(model, z, "z")
+    return linearised(_closed_loop_jacobian, config)(model, feedback, z)
+
+
 def closed_loop_multipliers(model, feedback, z, config=TIGHT_CONFIG):
-    """Closed-loop multipliers as the eigenvalues of `closed_loop_jacobian`, by modulus."""
-    return _sort(jnp.linalg.eigvals(closed_loop_jacobian(model, feedback, z, config)))
+    """Closed-loop multipliers as the eigenvalues of `closed_loop_jacobian`, by modulus
+    (descending), differentiable as `closed_loop_jacobian` (eigenvalue perturbation)."""
+    return eigenvalues(closed_loop_jacobian(model, feedback, z, config))
 
 
 class Stabilization(eqx.Module):

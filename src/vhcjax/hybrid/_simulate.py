@@ -22,6 +22,7 @@ import optimistix as optx
 from .._batching import host_workers, padded_map
 from .._programs import stored_jit
 from .._results import RESULTS
+from ..solvers._implicit import linearised
 from ._event_solve import solve_to_event
 
 
@@ -346,10 +347,14 @@ def step(model, x0, *, config=DEFAULT_CONFIG, throw=True):
     **Returns:** a `StepResult`.
     """
     x0 = jnp.asarray(x0, dtype=float)
-    out = step_unchecked(model, x0, config)
+    out = linearised(_step_of, config)(model, x0)
     if throw:
         out = eqx.tree_at(lambda r: r.x_plus, out, _raise_if_failed(out.result, out.x_plus))
     return out
+
+
+def _step_of(model, x0, config):
+    return step_unchecked(model, x0, config)
 
 
 def _raise_if_failed(result, token):
@@ -481,7 +486,7 @@ def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
 
 @stored_jit
 def _simulate_stored(model, x0, num_steps, config, dense_points, throw):
-    sim = _simulate(model, x0, num_steps, config, dense_points)
+    sim = linearised(_simulate, num_steps, config, dense_points)(model, x0)
     if throw:
         sim = eqx.tree_at(lambda s: s.x0, sim, _raise_if_failed(sim.result, sim.x0))
     return sim
@@ -504,7 +509,9 @@ def simulate(model, x0, num_steps, *, config=DEFAULT_CONFIG, dense_points=0, thr
       equally spaced times (for plots and animations).
     - `throw`: raise if the walker did not complete all steps.
 
-    **Returns:** a `Simulation`.
+    **Returns:** a `Simulation`. Differentiable in forward and reverse mode (`jax.grad`)
+    in `model` and `x0`: its derivatives come from a forward-mode Jacobian through the
+    heel strikes times the tangents, never from reverse mode through the ODE solves.
     """
     # One compiled program per model class and static arguments, shared by every caller.
     num_steps = int(num_steps) if isinstance(num_steps, np.integer) else num_steps
@@ -518,7 +525,8 @@ step = stored_jit(step)
 
 @stored_jit
 def _simulate_many(model, x0, num_steps, config):
-    return jax.vmap(lambda x: _simulate(model, x, num_steps, config))(x0)
+    member = linearised(_simulate, num_steps, config, 0)
+    return jax.vmap(lambda x: member(model, x))(x0)
 
 
 def simulate_batch(model, x0, num_steps, *, config=DEFAULT_CONFIG, mesh=None):
@@ -539,7 +547,8 @@ def simulate_batch(model, x0, num_steps, *, config=DEFAULT_CONFIG, mesh=None):
     - `config`: a `SolverConfig`.
     - `mesh`: a `jax.sharding.Mesh` with a `"batch"` axis, or None.
 
-    **Returns:** a `Simulation` whose arrays carry a leading batch axis.
+    **Returns:** a `Simulation` whose arrays carry a leading batch axis; differentiable
+    as `simulate` (a forward-mode Jacobian per member).
     """
     x0 = jnp.asarray(x0, dtype=float)
     if x0.ndim != 2 or x0.shape[1] != 2 * model.n_dof or x0.shape[0] == 0:

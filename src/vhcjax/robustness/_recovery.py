@@ -18,6 +18,7 @@ import numpy as np
 from .._programs import stored_jit
 from .._results import RESULTS, result_codes, results_from_codes
 from ..hybrid import FAST_CONFIG, step_unchecked
+from ..solvers import linearised
 
 CONVERGED, FELL, OTHER_CYCLE, UNDECIDED = 0, 1, 2, 3
 LABEL_NAMES = ("converged", "fell", "other_cycle", "undecided")
@@ -83,7 +84,9 @@ def recover(
     - `stop_when_converged`: if False, converged members keep walking (for recovery
       curves); their label and `steps` still record the first time within `tol`.
 
-    **Returns:** a `Recovery`.
+    **Returns:** a `Recovery`; its distances and periods are differentiable in forward
+    and reverse mode (`jax.grad`) in `model`, `x0` and `x_star` (a forward-mode Jacobian
+    over all their entries: for derivatives, keep the batch small).
     """
     x0 = jnp.asarray(x0, dtype=float)
     x_star = jnp.asarray(x_star, dtype=float)
@@ -98,18 +101,12 @@ def recover(
         raise ValueError(
             f"recover: num_steps and max_period must be at least 1, got {num_steps}, {max_period}"
         )
-    return _recover(
-        model,
-        x0,
-        x_star,
-        int(num_steps),
-        tol,
-        cycle_tol,
-        int(max_period),
-        config,
-        first_step,
-        stop_when_converged,
-    )
+    static = (int(num_steps), tol, cycle_tol, int(max_period), config, first_step)
+    return linearised(_recover_of, *static, stop_when_converged)(model, x0, x_star)
+
+
+def _recover_of(model, x0, x_star, *static):
+    return _recover(model, x0, x_star, *static)
 
 
 @stored_jit

@@ -22,6 +22,7 @@ from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, step_unchecked
 from ..models import CompassGait  # a floor step changes the compass gait's guard
+from ..solvers import linearised
 from ..stability import returns_to
 from ._bisection import bisect_threshold
 from ._recovery import recover
@@ -161,15 +162,17 @@ def gait_sensitivity_norm(model, x_star, num_steps=40, config=DEFAULT_CONFIG):
     forward-mode autodiff of single steps through the heel-strike event.
 
     **Returns:** a `GaitSensitivity` (`num_steps` >= 1, static). Pure: check its `result`.
+    Differentiable in forward and reverse mode (`jax.grad`) in `model` and `x_star`.
     """
     if isinstance(num_steps, bool) or not isinstance(num_steps, (int, np.integer)) or num_steps < 1:
         raise ValueError(
             f"gait_sensitivity_norm: num_steps must be an integer >= 1, got {num_steps!r}"
         )
-    return _gait_sensitivity_norm(model, x_star, int(num_steps), config)
+    return linearised(_gait_sensitivity_norm, int(num_steps), config)(
+        model, jnp.asarray(x_star, float)
+    )
 
 
-@stored_jit
 def _gait_sensitivity_norm(model, x_star, num_steps, config):
     def disturbed(h):
         sr = step_unchecked(floor_step_model(model, h), x_star, config)

@@ -155,16 +155,22 @@ def linearised(fn, *static):
     `args`: transposable, so reverse mode works through `fn` even where it contains
     `while_loop`s (diffrax, root finders). `static`: hashable arguments (settings), not
     differentiated. Integer outputs get float0 tangents. `fn` should be a module-level
-    function (it keys a compile cache)."""
+    function (it keys a compile cache). Leaves of `args` that are not arrays (a Python
+    integer in a user's feedback law, say) pass through as constants."""
 
-    @jax.custom_jvp
     def wrapped(*args):
-        return _apply(fn, _as_arrays(args), static)
+        arrays, rest = eqx.partition(_as_arrays(args), eqx.is_array)
 
-    @wrapped.defjvp
-    def wrapped_jvp(primals, tangents):
-        out, J = _jacobian(fn, _as_arrays(primals), static)
-        return out, _tangents(J @ _flat(tangents), out)
+        @jax.custom_jvp
+        def call(arrays):
+            return _apply(fn, eqx.combine(arrays, rest), static)
+
+        @call.defjvp
+        def call_jvp(primals, tangents):
+            out, J = _jacobian(fn, eqx.combine(primals[0], rest), static)
+            return out, _tangents(J @ _flat(tangents[0]), out)
+
+        return call(arrays)
 
     return wrapped
 

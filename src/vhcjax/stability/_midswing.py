@@ -9,7 +9,7 @@ import optimistix as optx
 from .._programs import stored_jit
 from ..hybrid import DEFAULT_CONFIG, ode_solver, solve_to_event
 from ..hybrid._simulate import _units
-from ._multipliers import _sort
+from ..solvers import eigenvalues, linearised
 
 
 def _gated_strike_event(model):
@@ -69,16 +69,23 @@ def to_midswing(model, z, config=DEFAULT_CONFIG):
     return xs[1:], ok
 
 
+def _midswing_jacobian(model, z, config):
+    w, ok0 = to_midswing(model, z, config)
+    J = jax.jacfwd(lambda ww: midswing_map(model, ww, config)[0])(w)
+    _, ok = midswing_map(model, w, config)
+    return J, w, ok0 & ok
+
+
 @stored_jit
 def midswing_multipliers(model, z, config=DEFAULT_CONFIG):
     """Multipliers of the gait through post-impact `z`, computed on the mid-swing section
     $q_1 = 0$: the forward-mode Jacobian of the return map from mid-swing to the next
-    mid-swing, a check of the multipliers on the post-impact section.
+    mid-swing, a check of the multipliers on the post-impact section. Differentiable in
+    forward and reverse mode (`jax.grad`; eigenvalue perturbation of that Jacobian, whose
+    own derivatives come from forward mode).
 
     **Returns:** `(multipliers, w, ok)`: the multipliers, the gait's mid-swing section
     point $w = (q_2, \\dot q_1, \\dot q_2)$ at $q_1 = 0$, and whether every swing of the
     computation reached its event."""
-    w, ok0 = to_midswing(model, z, config)
-    J = jax.jacfwd(lambda ww: midswing_map(model, ww, config)[0])(w)
-    _, ok = midswing_map(model, w, config)
-    return _sort(jnp.linalg.eigvals(J)), w, ok0 & ok
+    J, w, ok = linearised(_midswing_jacobian, config)(model, jnp.asarray(z, float))
+    return eigenvalues(J), w, ok

@@ -5,6 +5,7 @@ import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
+from .._host import host_only
 from .._results import RESULTS
 from ..hybrid import (
     DEFAULT_CONFIG,
@@ -43,6 +44,7 @@ def settle(model, z0, num_steps=400, config=FAST_CONFIG):
     return np.asarray(model.state_to_section(sim.steps.x_plus[-1]))
 
 
+@host_only("`fixed_point(model, z0, k)` and `poincare_multipliers(model, z, k)`")
 def period_k_orbit(model, z0, k, config=DEFAULT_CONFIG, *, iterations=20, h=1e-6):
     """Newton on $P^k(z) = z$ from `z0` (e.g. the section point after many steps of
     `simulate` on an attractor), with multipliers of $P^k$ by autodiff and by central
