@@ -198,7 +198,7 @@ def padded_map(
     n = jax.tree_util.tree_leaves(args)[0].shape[0]
     if tracing(args):
         return fn(*args)
-    if _distributed.split_is_worth(n) and not tracing(args):
+    if _distributed.split_is_worth(n):
         i, j, s = _distributed.share(n)
         own = jax.tree_util.tree_map(
             lambda a: (

@@ -347,14 +347,10 @@ def step(model, x0, *, config=DEFAULT_CONFIG, throw=True):
     **Returns:** a `StepResult`.
     """
     x0 = jnp.asarray(x0, dtype=float)
-    out = linearised(_step_of, config)(model, x0)
+    out = linearised(step_unchecked, config)(model, x0)
     if throw:
         out = eqx.tree_at(lambda r: r.x_plus, out, _raise_if_failed(out.result, out.x_plus))
     return out
-
-
-def _step_of(model, x0, config):
-    return step_unchecked(model, x0, config)
 
 
 def _raise_if_failed(result, token):

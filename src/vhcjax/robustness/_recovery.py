@@ -15,7 +15,6 @@ import jax.core
 import jax.numpy as jnp
 import numpy as np
 
-from .._programs import stored_jit
 from .._results import RESULTS, result_codes, results_from_codes
 from ..hybrid import FAST_CONFIG, step_unchecked
 from ..solvers import linearised
@@ -102,14 +101,9 @@ def recover(
             f"recover: num_steps and max_period must be at least 1, got {num_steps}, {max_period}"
         )
     static = (int(num_steps), tol, cycle_tol, int(max_period), config, first_step)
-    return linearised(_recover_of, *static, stop_when_converged)(model, x0, x_star)
+    return linearised(_recover, *static, stop_when_converged)(model, x0, x_star)
 
 
-def _recover_of(model, x0, x_star, *static):
-    return _recover(model, x0, x_star, *static)
-
-
-@stored_jit
 def _recover(
     model,
     x0,
@@ -122,8 +116,8 @@ def _recover(
     first_step,
     stop_when_converged,
 ):
-    """`recover` for checked arguments: one compiled program per model class and static
-    arguments (a stored program, see `vhcjax._programs`)."""
+    """`recover` for checked arguments (run by `linearised` as one stored program per
+    model class and static arguments, see `vhcjax._programs`)."""
     B = x0.shape[0]
     H = max_period + 1
     n = x_star.shape[-1] // 2
