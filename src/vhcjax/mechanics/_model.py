@@ -14,6 +14,7 @@ from typing import ClassVar
 
 import equinox as eqx
 import jax
+import jax.core
 import jax.numpy as jnp
 import numpy as np
 
@@ -51,6 +52,14 @@ class WalkerModel(eqx.Module):
                 object.__setattr__(self, field.name, jax.device_put(value.astype(np.float64)))
             elif isinstance(value, jax.Array) and value.dtype.kind in "iu":
                 object.__setattr__(self, field.name, jnp.asarray(value, dtype=float))
+            elif (
+                isinstance(value, jax.Array)
+                and value.weak_type
+                and not isinstance(value, jax.core.Tracer)
+            ):
+                # `jnp.asarray(0.05)` is weakly typed, `np.radians(3.0)` is not: without this
+                # the same walker at another slope would compile every program again
+                object.__setattr__(self, field.name, jax.device_put(np.asarray(value)))
 
     #: Parameters that must be positive (masses, lengths, gravity) and that must not be
     #: negative (e.g. the slope), checked by `validate`; every float parameter must be
