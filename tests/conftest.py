@@ -1,9 +1,7 @@
 import os
 
-# The tests run the library's plain jitted functions; stored programs (a later process
-# loading what an earlier one traced) are tested in `test_programs.py`, which turns them
-# on. Set before vhcjax is imported: subprocesses of the tests inherit it.
-os.environ.setdefault("VHCJAX_PROGRAMS", "off")
+# Stored programs are on, as a user has them: the test processes and the commands they
+# start load what another one traced (`vhcjax._programs`) from the compilation cache.
 # Commands run in the tests print no note of a slow compile (`vhcjax._programs.preparing`):
 # their stderr is what they say; `test_cli_waits.py` turns the notes on.
 os.environ.setdefault("VHCJAX_NOTE_AFTER", "inf")

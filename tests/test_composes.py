@@ -166,12 +166,11 @@ THROUGH_STEPS = {
 
 
 @pytest.mark.parametrize("name", sorted(THROUGH_STEPS))
-def test_reverse_and_forward_derivatives_through_steps(name):
-    """`jax.grad` and `jax.jacfwd` agree (to rounding) and equal central differences."""
+def test_reverse_derivatives_through_steps(name):
+    """`jax.grad` equals central differences."""
     f = THROUGH_STEPS[name]
     psi, h = jnp.asarray(0.03), 1e-5
     reverse = float(jax.grad(f)(psi))
-    np.testing.assert_allclose(float(jax.jacfwd(f)(psi)), reverse, rtol=1e-10, atol=1e-14)
     fd = (float(f(psi + h)) - float(f(psi - h))) / (2 * h)
     np.testing.assert_allclose(reverse, fd, rtol=1e-5, atol=1e-8)
 

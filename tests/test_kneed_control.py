@@ -139,7 +139,7 @@ def test_recovery_closed_loop_but_not_passive(gait, stabilized, d):
 
 def test_torque_is_zero_on_the_orbit(gait, stabilized):
     model, z = gait
-    sim = vj.simulate_closed_loop(model, model.section_to_state(z), stabilized.feedback, 3)
+    sim = vj.simulate_closed_loop(model, model.section_to_state(z), stabilized.feedback, 30)
     assert sim.result == vj.RESULTS.successful
     # on the orbit up to the integration error (tolerance 1e-10 in the walker's units):
     # measured 1.4e-9 of its torque unit M g L
@@ -157,7 +157,7 @@ def test_cli_kneed(capsys, tmp_path):
     from vhcjax import cli
 
     png = tmp_path / "k.png"
-    argv = ["stabilize", "--model", "kneed", "--slope-deg", "3.1", "--steps", "5"]
+    argv = ["stabilize", "--model", "kneed", "--slope-deg", "3.1", "--steps", "30"]
     assert cli.main(argv + ["--json", "--png", str(png)]) == 0
     out = json.loads(capsys.readouterr().out)
     assert out["result"] == "successful" and out["stable"] is True
@@ -170,5 +170,5 @@ def test_cli_kneed(capsys, tmp_path):
     clt = np.asarray(out["closed_loop_multipliers_transverse"])
     np.testing.assert_allclose(cl, clt, atol=1e-6)
     assert out["riccati_agreement"] is None and "Hamiltonian" in out["riccati_agreement_reason"]
-    assert out["simulation"]["steps_completed"] == 5
+    assert out["simulation"]["steps_completed"] == 30
     assert png.stat().st_size > 10_000
