@@ -58,7 +58,7 @@ class WalkerModel(eqx.Module):
                 and not isinstance(value, jax.core.Tracer)
             ):
                 # `jnp.asarray(0.05)` is weakly typed, `np.radians(3.0)` is not: without this
-                # the same walker at another slope would compile every program again
+                # the same walker at another slope would compile its jitted programs again
                 object.__setattr__(self, field.name, jax.device_put(np.asarray(value)))
 
     #: Parameters that must be positive (masses, lengths, gravity) and that must not be
