@@ -39,7 +39,8 @@ CALLS = {
 
 def _transverse(m, z):
     sr = vj.step(m, m.section_to_state(z))
-    return vj.transverse_linearization(m, sr.x_plus, sr.x_minus, sr.period).multipliers
+    period = float(sr.period)  # a Python number: another value runs the same program
+    return vj.transverse_linearization(m, sr.x_plus, sr.x_minus, period).multipliers
 
 
 @pytest.mark.parametrize("name", sorted(CALLS))

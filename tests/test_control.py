@@ -11,7 +11,6 @@
 
 import math
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -225,8 +224,8 @@ def test_push_step_without_feedback_is_the_passive_impulse_step(gaits, stabilize
     imp = jnp.array([1.0, 0.5])
     # A zero torque limit makes the law passive while keeping its pytree (one compile).
     off = vj.with_torque_limit(stabilized["unstable-3"].feedback, 0.0)
-    a = eqx.filter_jit(vj.closed_loop_push_step)(m, off, x0, t, imp)
-    b = eqx.filter_jit(vj.impulse_step)(m, x0, t, imp)
+    a = vj.closed_loop_push_step(m, off, x0, t, imp)
+    b = vj.impulse_step(m, x0, t, imp)
     assert a.result == b.result == vj.RESULTS.successful
     np.testing.assert_allclose(np.asarray(a.x_plus), np.asarray(b.x_plus), atol=1e-9)
 
@@ -245,7 +244,7 @@ def test_pushes_survived_with_and_without_feedback(gaits, stabilized):
     assert np.all(closed > 1.0)
     # The bisection's answer against a direct run: just below survives.
     p = 0.9 * closed[0, 0]
-    sr = eqx.filter_jit(vj.closed_loop_push_step)(m, st.feedback, x0, 0.2 * T, jnp.array([p, 0.0]))
+    sr = vj.closed_loop_push_step(m, st.feedback, x0, 0.2 * T, jnp.array([p, 0.0]))
     sim = vj.simulate_closed_loop(m, sr.x_plus, st.feedback, 30)
     assert _errors(m, z, sim)[-1] < 1e-4
 

@@ -4,7 +4,6 @@ differences of pushed simulations; the largest survivable push is bracketed by s
 
 import json
 
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -12,9 +11,9 @@ from _robust import long_walk, returns_to, stable_gait
 from _text import assert_plain_text
 
 import vhcjax as vj
+from vhcjax import _programs
 from vhcjax.robustness._push import direction, impulse_step, pulse_step
 
-impulse_step_jit = eqx.filter_jit(impulse_step)
 PHASES = jnp.array([0.0, 0.3, 0.6, 0.9])
 
 
@@ -26,7 +25,7 @@ def autodiff_sensitivity():
 
 def test_zero_push_is_nominal_step():
     model, _, x_star, period = stable_gait()
-    sr = impulse_step_jit(model, x_star, 0.5 * period, jnp.zeros(2))
+    sr = impulse_step(model, x_star, 0.5 * period, jnp.zeros(2))
     np.testing.assert_allclose(np.asarray(sr.x_plus), np.asarray(x_star), atol=1e-9)
     assert abs(float(sr.period) - period) < 1e-9
 
@@ -38,8 +37,8 @@ def test_push_sensitivity_autodiff_vs_finite_differences(autodiff_sensitivity):
     for i in (1, 3):
         for j in range(2):
             e = jnp.zeros(2).at[j].set(h)
-            xp = impulse_step_jit(model, x_star, PHASES[i] * period, e).x_plus
-            xm = impulse_step_jit(model, x_star, PHASES[i] * period, -e).x_plus
+            xp = impulse_step(model, x_star, PHASES[i] * period, e).x_plus
+            xm = impulse_step(model, x_star, PHASES[i] * period, -e).x_plus
             np.testing.assert_allclose(D[i, :, j], (xp - xm) / (2 * h), rtol=1e-5, atol=1e-7)
 
 
@@ -57,8 +56,8 @@ def test_short_pulse_approaches_impulse():
     model, _, x_star, period = stable_gait()
     P = 0.5 * direction(0.0)
     tau = 1e-4
-    a = impulse_step_jit(model, x_star, 0.3 * period, P).x_plus
-    b = eqx.filter_jit(pulse_step)(model, x_star, 0.3 * period - tau / 2, P / tau, tau).x_plus
+    a = impulse_step(model, x_star, 0.3 * period, P).x_plus
+    b = pulse_step(model, x_star, 0.3 * period - tau / 2, P / tau, tau).x_plus
     np.testing.assert_allclose(np.asarray(b), np.asarray(a), atol=1e-4)
 
 
@@ -70,10 +69,15 @@ def test_max_push_brackets():
     assert th.bracketed.all()
     for k, (s, a) in enumerate([(s, a) for s in phases for a in angles]):
         for mag, expect in ((th.lo[k], True), (th.hi[k], False)):
-            sr = impulse_step_jit(model, x_star, s * period, mag * direction(a))
+            sr = impulse_step(model, x_star, s * period, mag * direction(a))
             ok = vj.result_names(sr.result) == "successful"
             assert (ok and returns_to(long_walk(model, sr.x_plus), x_star)) == expect
     assert res.largest.shape == (2, 2)
+    # at another step period (a gait at another slope, given as a Python float) the same
+    # stored program runs: nothing is traced, exported or loaded again
+    before = dict(_programs.stats)
+    vj.max_push(model, x_star, period * (1 + 1e-6), phases, angles, iterations=1)
+    assert _programs.stats == before
 
 
 def test_a_pulse_past_the_heel_strike_is_refused(capsys):

@@ -15,9 +15,6 @@ from vhcjax.mechanics import _lagrangian as mech
 from vhcjax.models._pendulum_walker import PendulumWalker
 from vhcjax.stability._transverse import transverse_linearization
 
-vhc_orbit_jit = eqx.filter_jit(vhc_orbit)
-transverse_jit = eqx.filter_jit(transverse_linearization)
-
 
 def _cross(r, v):
     return r[0] * v[1] - r[1] * v[0]
@@ -71,7 +68,7 @@ def test_pendulum_walker_impact_conserves_angular_momenta(pw):
 def test_vhc_arc_confirms_the_time_domain_fixed_point(pw, pw_gait):
     """The theta-domain VHC arc (phi'' ODE + energy) from the Poincare fixed point returns
     to it through the impact map, with the same period."""
-    orb = vhc_orbit_jit(pw, pw_gait.z)
+    orb = vhc_orbit(pw, pw_gait.z)
     assert orb.result == RESULTS.successful
     np.testing.assert_allclose(orb.z_next, pw_gait.z, atol=1e-8)
     np.testing.assert_allclose(orb.period, pw_gait.periods[0], rtol=1e-8)
@@ -81,8 +78,8 @@ def test_vhc_arc_confirms_the_time_domain_fixed_point(pw, pw_gait):
 
 @pytest.mark.slow
 def test_transverse_linearization_matches_poincare_multipliers_3dof(pw, pw_gait):
-    sr = eqx.filter_jit(vhcjax.step)(pw, pw_gait.x0, throw=False)
-    tl = transverse_jit(pw, pw_gait.x0, sr.x_minus, pw_gait.periods[0])
+    sr = vhcjax.step(pw, pw_gait.x0, throw=False)
+    tl = transverse_linearization(pw, pw_gait.x0, sr.x_minus, pw_gait.periods[0])
     assert tl.result == RESULTS.successful
     assert tl.Xi.shape == (5, 5)  # 2n - 1 transverse coordinates
     ev_p = np.asarray(jnp.linalg.eigvals(vhcjax.poincare_jacobian(pw, pw_gait.z)))
@@ -94,7 +91,7 @@ def test_transverse_linearization_matches_poincare_multipliers_3dof(pw, pw_gait)
 @pytest.mark.slow
 def test_pendulum_walker_walks_100_steps(pw, pw_gait):
     x0 = pw.section_to_state(pw_gait.z + jnp.array([0.0, 0.02, 0.0, 0.0, 0.0]))
-    sim = eqx.filter_jit(vhcjax.simulate)(pw, x0, 100)
+    sim = vhcjax.simulate(pw, x0, 100)
     assert sim.result == RESULTS.successful
     z = jax.vmap(pw.state_to_section)(sim.steps.x_plus)
     d = np.max(np.abs(np.asarray(z) - np.asarray(pw_gait.z)), axis=1)
@@ -108,7 +105,7 @@ def test_n_dof_vhc_search_reproduces_two_dof_problem_1():
     from vhcjax.gait import vhc_search
 
     cg = vhcjax.CompassGait()
-    g_n = eqx.filter_jit(vhc_gait_search)(cg, jnp.array([0.21, -1.1, -0.37]))
+    g_n = vhc_gait_search(cg, jnp.array([0.21, -1.1, -0.37]))
     g_2 = eqx.filter_jit(vhc_search)(cg, jnp.array([0.21, -1.1]))
     assert g_n.result == RESULTS.successful and g_2.result == RESULTS.successful
     np.testing.assert_allclose(g_n.z, g_2.z, atol=1e-9)
@@ -119,7 +116,7 @@ def test_n_dof_vhc_search_reproduces_two_dof_problem_1():
     k_time = np.sqrt(1e-6 / 1e4)
     big = vhcjax.CompassGait(m1=5e6, m2=5e6, mH=1e7, a=5e-7, b=5e-7, g=9.81e4)
     unit = np.array([1.0, 1.0 / k_time, 1.0 / k_time])
-    g_big = eqx.filter_jit(vhc_gait_search)(big, jnp.array([0.21, -1.1, -0.37]) * unit)
+    g_big = vhc_gait_search(big, jnp.array([0.21, -1.1, -0.37]) * unit)
     assert g_big.result == RESULTS.successful
     np.testing.assert_allclose(np.asarray(g_big.z) / unit, g_n.z, rtol=0, atol=1e-10)
     np.testing.assert_allclose(g_big.period, g_n.period * k_time, rtol=1e-10)

@@ -34,6 +34,7 @@ so that the note tells a compile from a long run. Without a receiver nothing cha
 import contextlib
 import functools
 import hashlib
+import inspect
 import math
 import os
 import pickle
@@ -575,12 +576,19 @@ def require_x64():
         )
 
 
-def stored_jit(fn):
+def stored_jit(fn=None, *, arrays=()):
     """`eqx.filter_jit(fn)` whose programs are also kept on disk (see the module docstring).
 
     `fn` takes pytrees of arrays and static values (as with `filter_jit`) and returns a
-    pytree whose non-array leaves depend only on the static arguments.
+    pytree whose non-array leaves depend only on the static arguments. The arguments
+    named in `arrays` (times, impulses: numbers that change from gait to gait) are made
+    float64 arrays when given as Python numbers, so that another value does not compile
+    another program, as a static one would.
     """
+    if fn is None:
+        return functools.partial(stored_jit, arrays=arrays)
+    if arrays:
+        return _as_arrays(stored_jit(fn), fn, arrays)
     if "<locals>" in fn.__qualname__ or getattr(fn, "__closure__", None):
         # A closure's captured values are not arguments: they cannot enter the key.
         raise TypeError(f"stored_jit needs a module-level function, not {fn.__qualname__}")
@@ -637,6 +645,27 @@ def stored_jit(fn):
 
     call.plain = plain  # pyright: ignore[reportAttributeAccessIssue]  (the filter_jit path)
     return call
+
+
+def _as_arrays(call, fn, names):
+    """`call` with the arguments of `fn` named in `names` made float64 arrays where they
+    are Python numbers (`stored_jit(arrays=...)`)."""
+    signature = inspect.signature(fn)
+    missing = set(names) - set(signature.parameters)
+    if missing:
+        raise TypeError(f"stored_jit: {fn.__qualname__} has no argument {sorted(missing)}")
+
+    @functools.wraps(fn)
+    def wrapped(*args, **kwargs):
+        bound = signature.bind(*args, **kwargs)
+        for name in names:
+            value = bound.arguments.get(name)
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                bound.arguments[name] = np.float64(value)
+        return call(*bound.args, **bound.kwargs)
+
+    wrapped.plain = call.plain  # pyright: ignore[reportAttributeAccessIssue]
+    return wrapped
 
 
 def _signature(args, kwargs):

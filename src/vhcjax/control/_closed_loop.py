@@ -345,7 +345,7 @@ def closed_loop_basin(
     )
 
 
-@stored_jit
+@stored_jit(arrays=("t_push",))
 def closed_loop_push_step(model, feedback, x0, t_push, impulse, config=DEFAULT_CONFIG, alive=True):
     """One step of the walker under `feedback` from the post-impact state `x0`, with a hip
     impulse `impulse` (N s, world frame) at time `t_push` into the step (as
@@ -447,4 +447,4 @@ def closed_loop_max_push(
 closed_loop_basin = stored_jit(closed_loop_basin)
 closed_loop_multipliers = stored_jit(closed_loop_multipliers)
 closed_loop_jacobian = stored_jit(closed_loop_jacobian)
-closed_loop_max_push = stored_jit(closed_loop_max_push)
+closed_loop_max_push = stored_jit(arrays=("period", "p_max"))(closed_loop_max_push)

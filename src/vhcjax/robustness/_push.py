@@ -28,6 +28,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._batching import padded_map
 from .._host import host_only
 from .._programs import stored_jit
 from .._results import RESULTS
@@ -117,7 +118,7 @@ def _pushed_step(model, x0, t_push, kick, config, alive):
     return finish_step(model, x_minus, t_end, code, x0)
 
 
-@stored_jit
+@stored_jit(arrays=("t_push",))
 def impulse_step(model, x0, t_push, impulse, config=DEFAULT_CONFIG, alive=True):
     """One step from the post-impact state `x0` with a hip impulse `impulse` (N s, world
     frame) at time `t_push` after the step began (before the nominal heel strike).
@@ -132,7 +133,7 @@ def impulse_step(model, x0, t_push, impulse, config=DEFAULT_CONFIG, alive=True):
     return _pushed_step(model, x0, t_push, kick, config, alive)
 
 
-@stored_jit
+@stored_jit(arrays=("t_push", "duration"))
 def pulse_step(model, x0, t_push, force, duration, config=DEFAULT_CONFIG, alive=True):
     """One step from `x0` with a hip force `force` (N, world frame) acting during
     `[t_push, t_push + duration]` (integrated as its own segment, so that the adaptive
@@ -156,7 +157,7 @@ def pulse_step(model, x0, t_push, force, duration, config=DEFAULT_CONFIG, alive=
 
 
 # ---- linear sensitivity, way 1: autodiff through the pushed step -------------------------
-@stored_jit
+@stored_jit(arrays=("period",))
 def push_sensitivity_autodiff(model, x_star, period, phases, config=DEFAULT_CONFIG):
     """$\\partial x^+/\\partial P$ (shape `(len(phases), 2n, 2)`) of the post-impact state
     after a pushed step, per phase, by forward-mode autodiff at $P = 0$."""
@@ -170,7 +171,7 @@ def push_sensitivity_autodiff(model, x_star, period, phases, config=DEFAULT_CONF
 
 
 # ---- linear sensitivity, way 2: transverse linearization + input term -------------------
-@stored_jit
+@stored_jit(arrays=("period",))
 def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-11, atol=1e-11):
     """$\\partial\\zeta^+/\\partial P$ (shape `(len(phases), 2n-1, 2)`): the transverse
     coordinates after the next impact per unit hip impulse at each phase, from the
@@ -224,7 +225,7 @@ def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-
 
 
 # ---- largest push survived -----------------------------------------------------------------
-@stored_jit
+@stored_jit(arrays=("period",))
 def push_recovery(
     model,
     x_star,
@@ -348,10 +349,13 @@ def max_push(
     S, A = np.meshgrid(phases, angles, indexing="ij")
     s_flat, a_flat = jnp.asarray(S.ravel()), jnp.asarray(A.ravel())
 
-    def survives(mag):  # the recovery labels: CONVERGED (0) survives
+    def labels(s, a, mag):
         return push_recovery(
-            model, x_star, period, s_flat, a_flat, mag, num_steps, tol, duration, config
+            model, x_star, period, s, a, mag, num_steps, tol, duration, config
         ).label
+
+    def survives(mag):  # the recovery labels: CONVERGED (0) survives; in padded batches
+        return padded_map(labels, s_flat, a_flat, jnp.asarray(mag, float), stage="pushes")
 
     th = bisect_threshold(
         survives,

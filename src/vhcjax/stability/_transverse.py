@@ -269,7 +269,7 @@ def joint_vector_field(t, u, args):
     )
 
 
-@stored_jit
+@stored_jit(arrays=("period",))
 def transverse_linearization(
     model, x_plus, x_minus, period, *, rtol=1e-11, atol=1e-11, max_steps=4096
 ):
