@@ -314,12 +314,9 @@ def _search_batch(model, guesses, sign, method, solver, axes, chord, far):
 
 
 @stored_jit
-def _search_single(model, guesses, sign, method, solver, chord, far):
-    """`_search` on a batch of one member, unbatched inside."""
-    one = jax.tree_util.tree_map(
-        lambda x: x[0] if (eqx.is_array(x) and jnp.ndim(x) > 0) else x, model
-    )
-    gait = _search(one, guesses[0], sign, method, solver, chord, far=far)
+def _search_single(model, guess, sign, method, solver, chord, far):
+    """`_search` of one member (`model` unbatched), as a batch of one."""
+    gait = _search(model, guess, sign, method, solver, chord, far=far)
     return jax.tree_util.tree_map(lambda x: x[None], gait)
 
 
@@ -506,7 +503,12 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord, far=None):
     B = _batch_size(model, guesses)
     sign = family_sign(family)
     if B == 1 and guesses is not None:  # one member: no batching to trace or run
-        gaits = _search_single(model, guesses, sign, method, solver, bool(chord), far)
+        # the member, unbatched here: a model given with batched parameters and one with
+        # scalar ones run one program
+        one = jax.tree_util.tree_map(
+            lambda x: x[0] if (eqx.is_array(x) and jnp.ndim(x) > 0) else x, model
+        )
+        gaits = _search_single(one, guesses[0], sign, method, solver, bool(chord), far)
         return _clean_failed(_relabel(gaits, family), guesses, B)
     # one member (a homotopy, no guess) runs alone: a padded batch would repeat its work
     chunk = 1 if B == 1 else _chunk_size(B, host_workers(mesh), mesh)
@@ -517,8 +519,9 @@ def _find_gaits(model, guesses, family, method, solver, mesh, chord, far=None):
         isinstance(x, jax.core.Tracer) for x in jax.tree_util.tree_leaves(model)
     ):  # needs (a power of two: few programs), as `continue_to_model` takes for each one
         num = bucket_size(_homotopy_steps(_seed(model, sign, method)[0], model), _HOMOTOPY_STEPS)
-    # the batched parameters, each with B rows; the rest is shared by every member
-    batched, shared = eqx.partition(model, lambda x: eqx.is_array(x) and jnp.ndim(x) > 0)
+    # every parameter with B rows, varied or not: a study of the slope and one of the hip
+    # mass run one program (its key would name which parameters vary)
+    batched, shared = eqx.partition(model, eqx.is_array)
     batched = jax.tree_util.tree_map(
         lambda x: jnp.broadcast_to(x, (B,) + jnp.shape(x)[1:]), batched
     )

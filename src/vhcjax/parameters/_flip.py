@@ -84,11 +84,10 @@ def _take(model, idx):
 
 
 def _det_and_radius_batch(model, zs):
-    """`_det_and_radius` of a batch: one dispatch for a small batch, chunks of one size
-    for a large one (run one per CPU core at a time, `padded_map`)."""
+    """`_det_and_radius` of a batch, in chunks of the library's padded sizes
+    (`padded_map`), every parameter broadcast to the batch: which parameters vary does not
+    make another program."""
     n = np.shape(zs)[0]
-    if n <= _SUBSET:
-        return _det_and_radius(model, jnp.asarray(zs))
     return padded_map(_det_and_radius, _broadcast(model, n, every=True), jnp.asarray(zs))
 
 
