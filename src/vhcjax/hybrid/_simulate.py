@@ -19,7 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
-from .._batching import host_workers, padded_map
+from .._batching import bucket_size, host_workers, padded_map
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..solvers._implicit import linearised
@@ -426,18 +426,20 @@ def check_map_steps(k):
     return n
 
 
-def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
+def _simulate(model, x0, count, capacity, config=DEFAULT_CONFIG, dense_points=0):
+    """`capacity` (static) steps of which the first `count` (an array) are walked; the
+    rest take no time and are cut off by `_first_steps`."""
     x0 = jnp.asarray(x0, dtype=float)
     check_state_shape(model, x0)
-    check_num_steps(num_steps)
     # An invalid model (negative mass, NaN gravity, negative slope, ...) takes no step:
     # every step carries `bad_input`, whatever the dynamics would have done with it.
     valid = model.validate() if hasattr(model, "validate") else jnp.asarray(True)
 
     multidomain_dense = bool(dense_points) and hasattr(model, "num_domains")
 
-    def body(carry, _):
+    def body(carry, k):
         x, alive, first_fail = carry
+        alive = alive & (k < count)
         if multidomain_dense:  # the cycle once, with what its dense output needs
             from ._multidomain import dense_cycle
 
@@ -474,18 +476,41 @@ def _simulate(model, x0, num_steps, config=DEFAULT_CONFIG, dense_points=0):
         return (x_next, ok, new_fail), (out, dense)
 
     init = (x0, valid, RESULTS.where(valid, RESULTS.successful, RESULTS.bad_input))
-    (_, _, first_fail), (steps, dense) = jax.lax.scan(body, init, None, length=num_steps)
-    num_ok = jnp.sum(steps.result == RESULTS.successful)
+    (_, _, first_fail), (steps, dense) = jax.lax.scan(body, init, jnp.arange(capacity))
+    num_ok = jnp.sum((steps.result == RESULTS.successful) & (jnp.arange(capacity) < count))
     dense_t, dense_x = (None, None) if dense is None else dense
     return Simulation(steps, first_fail, num_ok, x0, dense_t, dense_x)
 
 
 @stored_jit
-def _simulate_stored(model, x0, num_steps, config, dense_points, throw):
-    sim = linearised(_simulate, num_steps, config, dense_points)(model, x0)
+def _simulate_stored(model, x0, count, capacity, config, dense_points, throw):
+    sim = linearised(_simulate, capacity, config, dense_points)(model, x0, count)
     if throw:
         sim = eqx.tree_at(lambda s: s.x0, sim, _raise_if_failed(sim.result, sim.x0))
     return sim
+
+
+def _capacity(num_steps):
+    """Steps a simulation program holds: a step count rounded up to a power of two (at
+    least 8), so that nearby counts share one program; the steps past the count take no
+    time (a member that is not walking finishes at once)."""
+    check_num_steps(num_steps)
+    return bucket_size(num_steps)
+
+
+def _first_steps(sim, num_steps, axis=0):
+    """`sim` with its step axis (`axis`, after any batch axis) cut to `num_steps`."""
+    cut = (slice(None),) * axis + (slice(0, num_steps),)
+
+    def first(x):
+        return None if x is None else x[cut]
+
+    return eqx.tree_at(
+        lambda s: (s.steps, s.dense_t, s.dense_x),
+        sim,
+        (jax.tree_util.tree_map(first, sim.steps), first(sim.dense_t), first(sim.dense_x)),
+        is_leaf=lambda x: x is None,
+    )
 
 
 def simulate(model, x0, num_steps, *, config=DEFAULT_CONFIG, dense_points=0, throw=False):
@@ -499,7 +524,8 @@ def simulate(model, x0, num_steps, *, config=DEFAULT_CONFIG, dense_points=0, thr
 
     - `model`: a `WalkerModel`.
     - `x0`: initial state `[q, dq]`.
-    - `num_steps`: number of steps (static: a Python or numpy integer).
+    - `num_steps`: number of steps (a Python or numpy integer; counts up to the same power
+      of two, at least 8, run one compiled program).
     - `config`: a `SolverConfig`.
     - `dense_points`: if positive, also return the trajectory of each step on this many
       equally spaced times (for plots and animations).
@@ -510,8 +536,11 @@ def simulate(model, x0, num_steps, *, config=DEFAULT_CONFIG, dense_points=0, thr
     heel strikes times the tangents, never from reverse mode through the ODE solves.
     """
     # One compiled program per model class and static arguments, shared by every caller.
-    num_steps = int(num_steps) if isinstance(num_steps, np.integer) else num_steps
-    return _simulate_stored(model, x0, num_steps, config, dense_points, throw)
+    capacity = _capacity(num_steps)
+    count = np.int64(num_steps)
+    return _first_steps(
+        _simulate_stored(model, x0, count, capacity, config, dense_points, throw), num_steps
+    )
 
 
 # The public entry points are jitted once here (models carry array leaves, so one
@@ -520,9 +549,9 @@ step = stored_jit(step)
 
 
 @stored_jit
-def _simulate_many(model, x0, num_steps, config):
-    member = linearised(_simulate, num_steps, config, 0)
-    return jax.vmap(lambda x: member(model, x))(x0)
+def _simulate_many(model, x0, count, capacity, config):
+    member = linearised(_simulate, capacity, config, 0)
+    return jax.vmap(lambda x: member(model, x, count))(x0)
 
 
 def simulate_batch(model, x0, num_steps, *, config=DEFAULT_CONFIG, mesh=None):
@@ -539,7 +568,7 @@ def simulate_batch(model, x0, num_steps, *, config=DEFAULT_CONFIG, mesh=None):
 
     - `model`: a `WalkerModel`.
     - `x0`: initial states, shape `(batch, 2 n_dof)`.
-    - `num_steps`: number of steps (static).
+    - `num_steps`: number of steps (a Python or numpy integer; as in `simulate`).
     - `config`: a `SolverConfig`.
     - `mesh`: a `jax.sharding.Mesh` with a `"batch"` axis, or None.
 
@@ -551,15 +580,16 @@ def simulate_batch(model, x0, num_steps, *, config=DEFAULT_CONFIG, mesh=None):
         raise ValueError(
             f"x0 must have shape (batch, {2 * model.n_dof}) with batch >= 1, got {x0.shape}"
         )
-    check_num_steps(num_steps)
-    num_steps = int(num_steps)  # a numpy integer too: a count, not an array to trace
+    capacity = _capacity(num_steps)
+    count = np.int64(num_steps)
     # One chunk per CPU core: a chunk waits for its slowest walker, so a few large chunks
     # beat many of 256 (about 1.1x at 1,000 walkers on 2 cores, bench_simulate.py).
     per_worker = -(-x0.shape[0] // host_workers(mesh))
-    return padded_map(
-        lambda x: _simulate_many(model, x, num_steps, config),
+    sims = padded_map(
+        lambda x: _simulate_many(model, x, count, capacity, config),
         x0,
         max_chunk=per_worker,
         mesh=mesh,
         stage="simulation",
     )
+    return _first_steps(sims, int(num_steps), axis=1)
