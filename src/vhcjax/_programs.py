@@ -41,7 +41,9 @@ import pickle
 import re
 import tempfile
 import threading
+import typing
 import warnings
+from collections.abc import Callable
 
 import equinox as eqx
 import jax
@@ -50,6 +52,7 @@ import numpy as np
 
 from ._host import tracing
 
+_F = typing.TypeVar("_F", bound=Callable)
 _SUFFIX = ".program"
 _memo = {}  # path of a stored program -> its `_Program`, or None for the plain path
 _lock = threading.RLock()  # reentrant: an export may call another stored function
@@ -576,7 +579,11 @@ def require_x64():
         )
 
 
-def stored_jit(fn=None, *, arrays=()):
+@typing.overload
+def stored_jit(fn: _F) -> _F: ...
+@typing.overload
+def stored_jit(fn: None = None, *, arrays: tuple[str, ...] = ()) -> Callable[[_F], _F]: ...
+def stored_jit(fn: typing.Any = None, *, arrays: tuple[str, ...] = ()) -> typing.Any:
     """`eqx.filter_jit(fn)` whose programs are also kept on disk (see the module docstring).
 
     `fn` takes pytrees of arrays and static values (as with `filter_jit`) and returns a

@@ -25,17 +25,23 @@ from .._results import result_codes
 from ..hybrid import FAST_CONFIG, in_walker_units, section_rates
 from ._bisection import bisect_threshold
 from ._gait_check import require_gait
-from ._recovery import CONVERGED, recover
+from ._recovery import CONVERGED, recover_padded, step_capacity
 
 BASIN_CONFIG = FAST_CONFIG
 """Swing integration used for basin maps: Tsit5, rtol = atol = 1e-8 (`FAST_CONFIG`)."""
 
 
-@stored_jit
 def _recover_chunk(model, z, z_star, num_steps, tol, config):
     """The fate of each point: the summary only (not the per-step distances)."""
+    capacity = step_capacity(num_steps)
+    return _recover_summary(model, z, z_star, np.int64(num_steps), capacity, tol, config)
+
+
+@stored_jit
+def _recover_summary(model, z, z_star, count, capacity, tol, config):
     x0 = jax.vmap(model.section_to_state)(z)
-    rec = recover(model, x0, model.section_to_state(z_star), num_steps, tol=tol, config=config)
+    x_star = model.section_to_state(z_star)
+    rec = recover_padded(model, x0, x_star, count, capacity, tol=tol, config=config)
     return {
         "label": rec.label,
         "steps": rec.steps,

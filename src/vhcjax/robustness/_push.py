@@ -34,7 +34,7 @@ from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, StepResult, classify_solve, flow
 from ._bisection import Threshold, bisect_threshold
-from ._recovery import recover
+from ._recovery import first_steps, recover_padded, step_capacity
 
 
 def hip_jacobian(model, q):
@@ -225,7 +225,6 @@ def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-
 
 
 # ---- largest push survived -----------------------------------------------------------------
-@stored_jit(arrays=("period",))
 def push_recovery(
     model,
     x_star,
@@ -243,6 +242,26 @@ def push_recovery(
 
     **Returns:** a `vhcjax.Recovery`.
     """
+    rec = _push_recovery(
+        model,
+        x_star,
+        period,
+        phases,
+        angles,
+        magnitudes,
+        np.int64(num_steps),
+        step_capacity(num_steps),
+        tol,
+        duration,
+        config,
+    )
+    return first_steps(rec, num_steps)
+
+
+@stored_jit(arrays=("period",))
+def _push_recovery(
+    model, x_star, period, phases, angles, magnitudes, count, capacity, tol, duration, config
+):
     s = jnp.asarray(phases, dtype=float)
     P = jnp.asarray(magnitudes, dtype=float)[:, None] * jax.vmap(direction)(jnp.asarray(angles))
     x0 = jnp.broadcast_to(x_star, (s.shape[0], x_star.shape[0]))
@@ -256,7 +275,9 @@ def push_recovery(
             lambda xx, ss, pp, aa: impulse_step(model, xx, ss * period, pp, config, aa)
         )(x, s, P, alive)
 
-    return recover(model, x0, x_star, num_steps, tol=tol, config=config, first_step=first)
+    return recover_padded(
+        model, x0, x_star, count, capacity, tol=tol, config=config, first_step=first
+    )
 
 
 def pulse_past_strike(phases, period, duration):

@@ -15,6 +15,7 @@ import jax.core
 import jax.numpy as jnp
 import numpy as np
 
+from .._batching import bucket_size
 from .._results import RESULTS, result_codes, results_from_codes
 from ..hybrid import FAST_CONFIG, step_unchecked
 from ..solvers import linearised
@@ -69,7 +70,8 @@ def recover(
     - `model`: a `WalkerModel`.
     - `x0`: post-impact states, shape `(batch, 2n)`.
     - `x_star`: post-impact state of the gait (a fixed point of the step map).
-    - `num_steps`: largest number of steps simulated (static).
+    - `num_steps`: largest number of steps simulated (a Python integer; every budget up
+      to 64 steps runs one compiled program).
     - `tol`: converged when $\\|x_k - x^*\\|_\\infty <$ `tol`, in the walker's own units
       (angles in rad, velocities times `model.time_scale`), so that a walker and its
       rescaled copy converge on the same step.
@@ -100,15 +102,65 @@ def recover(
         raise ValueError(
             f"recover: num_steps and max_period must be at least 1, got {num_steps}, {max_period}"
         )
-    static = (int(num_steps), tol, cycle_tol, int(max_period), config, first_step)
-    return linearised(_recover, *static, stop_when_converged)(model, x0, x_star)
+    rec = recover_padded(
+        model,
+        x0,
+        x_star,
+        np.int64(num_steps),
+        step_capacity(num_steps),
+        tol=tol,
+        cycle_tol=cycle_tol,
+        max_period=max_period,
+        config=config,
+        first_step=first_step,
+        stop_when_converged=stop_when_converged,
+    )
+    return first_steps(rec, num_steps)
+
+
+def step_capacity(num_steps):
+    """Steps a recovery program holds room for: `num_steps` rounded up to a power of two,
+    at least 64, so that every usual step budget runs one program. The loop stops at
+    `num_steps` (or when every member is decided): the room costs no simulation."""
+    return bucket_size(int(num_steps), minimum=64)
+
+
+def first_steps(rec, num_steps):
+    """A `Recovery` of `recover_padded` with its per-step arrays cut to `num_steps`."""
+    return eqx.tree_at(
+        lambda r: (r.distance, r.step_times),
+        rec,
+        (rec.distance[..., : num_steps + 1], rec.step_times[..., :num_steps]),
+    )
+
+
+def recover_padded(
+    model,
+    x0,
+    x_star,
+    count,
+    capacity,
+    *,
+    tol=1e-4,
+    cycle_tol=1e-5,
+    max_period=4,
+    config=FAST_CONFIG,
+    first_step=None,
+    stop_when_converged=True,
+):
+    """`recover` of at most `count` steps (an integer array) with per-step arrays of
+    `capacity` steps (static; `step_capacity`): the form the stored programs of the
+    robustness studies call, so that one program serves every step budget."""
+    static = (capacity, tol, cycle_tol, int(max_period), config, first_step)
+    return linearised(_recover, *static, stop_when_converged)(model, x0, x_star, count)
 
 
 def _recover(
     model,
     x0,
     x_star,
-    num_steps,
+    count,
+    capacity,
     tol,
     cycle_tol,
     max_period,
@@ -156,22 +208,22 @@ def _recover(
     alive0 = ~conv0 if stop_when_converged else jnp.ones(B, bool)
     code0 = jnp.full(B, result_codes(RESULTS.successful))
     hist0 = jnp.zeros((B, H, x0.shape[-1])).at[:, 0].set(x0)
-    dist_arr0 = jnp.broadcast_to(dist0[:, None], (B, num_steps + 1))
-    times0 = jnp.zeros((B, num_steps))
+    dist_arr0 = jnp.broadcast_to(dist0[:, None], (B, capacity + 1))
+    times0 = jnp.zeros((B, capacity))
     carry = (0, x0, alive0, label0, steps0, code0, hist0, dist_arr0, times0)
     # The first step may use another model (terrain disturbance): done outside the loop.
     sr0 = batched_step(model, x0, alive0) if first_step is None else first_step(x0, alive0)
     carry = update(carry, sr0)
 
     def cond(c):
-        return (c[0] < num_steps) & jnp.any(c[2])
+        return (c[0] < count) & jnp.any(c[2])
 
     def body(c):
         return update(c, batched_step(model, c[1], c[2]))
 
     k, x, alive, label, steps, code, hist, dist, times = jax.lax.while_loop(cond, body, carry)
     # Members that stopped early: fill the rest of the distance history with the last value.
-    idx = jnp.arange(num_steps + 1)
+    idx = jnp.arange(capacity + 1)
     last = jnp.take_along_axis(dist, jnp.full((B, 1), k), axis=1)
     dist = jnp.where(idx[None, :] > k, last, dist)
 

@@ -25,7 +25,7 @@ from ..models import CompassGait  # a floor step changes the compass gait's guar
 from ..solvers import linearised
 from ..stability import returns_to
 from ._bisection import bisect_threshold
-from ._recovery import recover
+from ._recovery import first_steps, recover_padded, step_capacity
 
 
 class FloorStepCompassGait(CompassGait):
@@ -63,7 +63,6 @@ def _first_step_fn(model, h, config):
     return first
 
 
-@stored_jit
 def terrain_recovery(
     model, x_star, h, num_steps=30, tol=1e-4, config=FAST_CONFIG, stop_when_converged=True
 ):
@@ -72,17 +71,33 @@ def terrain_recovery(
 
     **Returns:** a `vhcjax.Recovery` (label, steps to converge, step times, distances).
     """
+    rec = _terrain_recovery(
+        model,
+        x_star,
+        h,
+        np.int64(num_steps),
+        step_capacity(num_steps),
+        tol,
+        config,
+        stop_when_converged,
+    )
+    return first_steps(rec, num_steps)
+
+
+@stored_jit
+def _terrain_recovery(model, x_star, h, count, capacity, tol, config, stop_when_converged):
     h = jnp.asarray(h, dtype=float)
     # Every member starts on the gait. Seen as one state broadcast over the batch, the
     # start-up of the first step's ODE solve (diffrax's time clipping, equinox's bitwise
     # `nextafter`) sends XLA's algebraic simplifier round a rewrite cycle (50 rounds and
     # a logged error per compile); the barrier hides the broadcast, the numbers are equal.
     x0 = jax.lax.optimization_barrier(jnp.broadcast_to(x_star, (h.shape[0], x_star.shape[0])))
-    return recover(
+    return recover_padded(
         model,
         x0,
         x_star,
-        num_steps,
+        count,
+        capacity,
         tol=tol,
         config=config,
         first_step=_first_step_fn(model, h, config),
