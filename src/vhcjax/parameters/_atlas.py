@@ -94,7 +94,7 @@ def atlas(
     method="auto",
     checkpoint=None,
     chunk_cells=256,
-):
+) -> Atlas:
     """The atlas of the stable compass gait over a grid of $\\mu$ and $\\beta$.
 
     **Arguments:**

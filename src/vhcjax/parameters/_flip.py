@@ -91,7 +91,9 @@ def _det_and_radius_batch(model, zs):
     return padded_map(_det_and_radius, _broadcast(model, n, every=True), jnp.asarray(zs))
 
 
-def _evaluate(model, psi, zs, mask, solver="newton"):
+def _evaluate(
+    model, psi, zs, mask, solver="newton"
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Gaits at slopes `psi` (B,) from guesses `zs` (B, 3) of the members in `mask`:
     section points, ok, F, rho (the other members of a large batch: their guess, False,
     NaN, NaN; see `_SUBSET`)."""
@@ -142,7 +144,7 @@ def flip_slopes(
     step=math.radians(0.25),
     tol=1e-12,
     max_iter=60,
-):
+) -> FlipScan:
     """First flip slope of the stable period-1 gait for each model of a batch.
 
     **Arguments:**
