@@ -161,8 +161,11 @@ def free_units(P, units):
 def solve_in_phase(field, y0, t0, t1, saveat, rtol, atol, max_steps):
     """`diffeqsolve` of `field` over the phase from `t0` to `t1` (either way): Tsit5 with
     a PID controller, failures as diffrax result codes. `atol`: a scalar, or one value
-    per component of `y0` (tolerances in the walker's own units)."""
-    return diffrax.diffeqsolve(
+    per component of `y0` (tolerances in the walker's own units). `SaveAt(ts=...)` is
+    answered from the solver's interpolant (as diffrax does, but without its host-side
+    check of the save times, so that a program holding the solve stays storable)."""
+    ts = saveat.subs.ts if isinstance(saveat.subs, diffrax.SubSaveAt) else None
+    sol = diffrax.diffeqsolve(
         diffrax.ODETerm(field),
         diffrax.Tsit5(),
         t0=t0,
@@ -170,10 +173,13 @@ def solve_in_phase(field, y0, t0, t1, saveat, rtol, atol, max_steps):
         dt0=None,
         y0=y0,
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-        saveat=saveat,
+        saveat=diffrax.SaveAt(dense=True) if ts is not None else saveat,
         max_steps=max_steps,
         throw=False,
     )
+    if ts is None:
+        return sol
+    return eqx.tree_at(lambda s: s.ys, sol, jax.vmap(sol.evaluate)(ts), is_leaf=lambda x: x is None)
 
 
 def _tabulate(model, x_start, theta_minus, num_points, domain, x_next):
@@ -207,12 +213,13 @@ def _tabulate(model, x_start, theta_minus, num_points, domain, x_next):
         dt0=1.0 / (num_points - 1),
         y0=y0,
         stepsize_controller=diffrax.ConstantStepSize(),
-        saveat=diffrax.SaveAt(ts=s),
+        # the interpolant on the grid (as `SaveAt(ts=s)`, without diffrax's host-side
+        # check of the save times: the program stays storable)
+        saveat=diffrax.SaveAt(dense=True),
         max_steps=num_points + 8,
         throw=False,
     )
-    ys = sol.ys
-    assert ys is not None  # saved at `ts`
+    ys = jax.vmap(sol.evaluate)(s)
     w = ys[:, :r]
     A, B, c = jax.vmap(lambda ss, ww: phase_matrices(model, theta_plus, delta, ss, ww, domain))(
         s, w

@@ -203,13 +203,16 @@ def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-
         dt0=None,
         y0=u0,
         args=(model, E0),
-        saveat=diffrax.SaveAt(ts=ts),
+        # the interpolant at `ts` (as `SaveAt(ts=...)`, without its host-side check of
+        # times that depend on the arguments: the program stays storable)
+        saveat=diffrax.SaveAt(dense=True),
         stepsize_controller=diffrax.PIDController(
             rtol=rtol, atol=atol * tr.joint_state_units(model)
         ),
         max_steps=4096,
         throw=False,
     )
+    ys = jax.vmap(sol.evaluate)(ts)
 
     def one(u):
         theta, dtheta, phi, dphi = tr.split_orbit_state(model, u)
@@ -221,7 +224,7 @@ def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-
         L = tr.L_matrix(model, E0, theta, dtheta, phi, dphi)
         return lin.dF_TS @ lin.Phi_T @ jnp.linalg.solve(Phi_s, L @ B)
 
-    return jax.vmap(one)(sol.ys), lin
+    return jax.vmap(one)(ys), lin
 
 
 # ---- largest push survived -----------------------------------------------------------------
