@@ -62,6 +62,24 @@ def test_stabilize_needs_a_gait_and_a_valid_model(gaits, stabilized):
         vj.stabilize(m, z, Q=jnp.ones(2))
 
 
+def test_stabilization_is_a_stored_program(gaits, stabilized, monkeypatch):
+    """`stabilize` holds no host callback: a later process loads its program (here: the
+    stored file, read again) and gets the same feedback."""
+    from vhcjax import _programs
+
+    if _programs.program_directory() is None:
+        pytest.skip("stored programs are off")
+    counts = {"exported": 0, "loaded": 0, "unexportable": 0}
+    monkeypatch.setattr(_programs, "stats", counts)
+    monkeypatch.setattr(_programs, "_memo", {})
+    m, z = gaits["unstable-3"]
+    again = vj.stabilize(m, z)
+    assert counts["unexportable"] == 0 and counts["loaded"] + counts["exported"] == 1
+    np.testing.assert_array_equal(
+        np.asarray(again.riccati.K), np.asarray(stabilized["unstable-3"].riccati.K)
+    )
+
+
 def test_input_enters_the_equations_of_motion(model):
     q = jnp.array([0.2, -0.3])
     dq = jnp.array([-1.1, 0.4])
