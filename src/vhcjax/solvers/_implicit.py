@@ -182,9 +182,12 @@ def _apply(fn, args, static):
 
 @stored_jit
 def _jacobian(fn, args, static):
-    x = _flat(args)
-    out = fn(*args, *static)
-    return out, jax.jacfwd(lambda v: _flat(fn(*_unflat(v, args), *static)))(x)
+    def flat_and_out(v):  # one trace of `fn`: the outputs ride along as the auxiliary
+        out = fn(*_unflat(v, args), *static)
+        return _flat(out), out
+
+    J, out = jax.jacfwd(flat_and_out, has_aux=True)(_flat(args))
+    return out, J
 
 
 def _sorted_eig(J):

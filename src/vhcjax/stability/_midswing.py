@@ -71,8 +71,7 @@ def to_midswing(model, z, config=DEFAULT_CONFIG):
 
 def _midswing_jacobian(model, z, config):
     w, ok0 = to_midswing(model, z, config)
-    J = jax.jacfwd(lambda ww: midswing_map(model, ww, config)[0])(w)
-    _, ok = midswing_map(model, w, config)
+    J, ok = jax.jacfwd(lambda ww: midswing_map(model, ww, config), has_aux=True)(w)
     return J, w, ok0 & ok
 
 
