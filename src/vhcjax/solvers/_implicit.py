@@ -21,6 +21,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.custom_derivatives import SymbolicZero
 
 from .._programs import stored_jit
 
@@ -153,7 +154,9 @@ def linearised(fn, *static):
     """`fn(*args, *static)` (a pytree function of pytrees) with a JVP given by its
     forward-mode Jacobian (`jax.jacfwd`) times the tangent of the inexact leaves of
     `args`: transposable, so reverse mode works through `fn` even where it contains
-    `while_loop`s (diffrax, root finders). `static`: hashable arguments (settings), not
+    `while_loop`s (diffrax, root finders). The Jacobian is taken with respect to the
+    leaves that carry a tangent only (the slope under `jax.grad` of a function of the
+    slope, not a feedback law's gain table). `static`: hashable arguments (settings), not
     differentiated. Integer outputs get float0 tangents. `fn` should be a module-level
     function (it keys a compile cache). Leaves of `args` that are not arrays (a Python
     integer in a user's feedback law, say) pass through as constants."""
@@ -165,14 +168,23 @@ def linearised(fn, *static):
         def call(arrays):
             return _apply(fn, eqx.combine(arrays, rest), static)
 
-        @call.defjvp
         def call_jvp(primals, tangents):
-            out, J = _jacobian(fn, eqx.combine(primals[0], rest), static)
-            return out, _tangents(J @ _flat(tangents[0]), out)
+            moves = jax.tree_util.tree_map(
+                lambda t: not isinstance(t, SymbolicZero), tangents[0], is_leaf=_is_zero
+            )
+            moving, fixed = eqx.partition(primals[0], moves)
+            out, J = _jacobian(fn, moving, eqx.combine(fixed, rest), static)
+            dmoving = eqx.filter(tangents[0], moves, is_leaf=_is_zero)
+            return out, _tangents(J @ _flat(dmoving), out)
 
+        call.defjvp(call_jvp, symbolic_zeros=True)
         return call(arrays)
 
     return wrapped
+
+
+def _is_zero(t):
+    return isinstance(t, SymbolicZero)
 
 
 @stored_jit
@@ -181,12 +193,15 @@ def _apply(fn, args, static):
 
 
 @stored_jit
-def _jacobian(fn, args, static):
+def _jacobian(fn, moving, fixed, static):
+    """The outputs of `fn` and their Jacobian with respect to the inexact leaves of
+    `moving` (the arguments are `moving` combined with `fixed`)."""
+
     def flat_and_out(v):  # one trace of `fn`: the outputs ride along as the auxiliary
-        out = fn(*_unflat(v, args), *static)
+        out = fn(*eqx.combine(_unflat(v, moving), fixed), *static)
         return _flat(out), out
 
-    J, out = jax.jacfwd(flat_and_out, has_aux=True)(_flat(args))
+    J, out = jax.jacfwd(flat_and_out, has_aux=True)(_flat(moving))
     return out, J
 
 
