@@ -1,8 +1,9 @@
 """First and second calls of library functions in a fresh Python process.
 
-What a notebook user waits for: each call of the README's ten lines, and of the main
+What a notebook user waits for: each call of the README's ten lines, of the main
 functions on a user's own model (`RodWalker`, the two-rod walker of the docs' new-model
-notebook, written as a user would), timed on its first call in a fresh process and on a
+notebook, written as a user would), and of derivatives in the slope (`jax.grad` through
+the gait search and the multipliers, open and closed loop), timed on its first call in a fresh process and on a
 second call with the same shapes and other values (another slope). Two fresh processes
 share one new compilation-cache folder: the first starts with it empty (tracing and
 compiling everything), the second with it filled by the first (a user's next session).
@@ -122,6 +123,33 @@ def _child():
         "simulate(model, x, 20, dense_points=60)",
         lambda p: vj.simulate(rods[p], ug[p].x_plus, 20, dense_points=60),
         *psis,
+    )
+
+    grads = "derivatives in the slope"
+
+    def radius(psi):
+        m = vj.CompassGait(psi=psi)
+        return vj.gait_spectrum(m, vj.find_gait(m, "stable")).spectral_radius
+
+    timed(
+        grads,
+        "jax.grad(spectral radius of the gait)",
+        lambda d: jax.grad(radius)(jnp.asarray(math.radians(d))),
+        *slopes,
+    )
+    closed = vj.CompassGait(psi=math.radians(3.0))
+    z = vj.find_gait(closed, "unstable").z
+    feedback = vj.stabilize(closed, z).feedback  # held fixed
+
+    def closed_loop_radius(psi):
+        return jnp.abs(vj.closed_loop_multipliers(vj.CompassGait(psi=psi), feedback, z)[0])
+
+    timed(
+        grads,
+        "jax.grad(closed-loop spectral radius)",
+        lambda d: jax.grad(closed_loop_radius)(jnp.asarray(math.radians(d))),
+        3.0,
+        3.05,
     )
     print(json.dumps(dict(import_s=import_s, rows=rows)))
 
