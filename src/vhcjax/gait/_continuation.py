@@ -195,7 +195,8 @@ _HOMOTOPY_RATIO = 0.015
 def _homotopy_steps(start, end):
     """Steps of the homotopy from `start` to `end` (`_path`): at least `_HOMOTOPY_STEPS`,
     and enough that no parameter changes by more than `_HOMOTOPY_RATIO` in one step
-    (relative, or absolute for lengths in the walker's own units)."""
+    (relative, or absolute for lengths in the walker's own units); one where `end` is
+    `start` (the reference walker itself: its gait is solved where it starts)."""
     import numpy as np
 
     units = type(end).UNITS
@@ -213,6 +214,8 @@ def _homotopy_steps(start, end):
             spread = max(spread, float(np.max(change)))
     if not np.isfinite(spread):  # the search codes the model bad_input
         return _HOMOTOPY_STEPS
+    if spread == 0.0:
+        return 1
     return max(_HOMOTOPY_STEPS, int(np.ceil(spread / np.log1p(_HOMOTOPY_RATIO))) + 1)
 
 
@@ -220,7 +223,7 @@ def continue_to_model(model, family="stable", method="vhc", num=None):
     """The `family` gait of `model` without a guess: homotopy from the model's `reference_gait` (for the compass gait the default
     walker at 3 degrees, thesis Table 1) to `model`, all parameters at once (`_path`), in
     `num` steps with a secant predictor (`None`: at least 16, and no parameter changing
-    by more than 1.5 % in a step). `method`: `"vhc"` or `"shooting"`. It runs in the
+    by more than 1.5 % in a step; one for the reference walker itself). `method`: `"vhc"` or `"shooting"`. It runs in the
     walker's own units (`in_own_units`): gravity and size drop out.
 
     **Returns:** a `Gait` (never raises; check `result`).
