@@ -223,8 +223,9 @@ def continue_to_model(model, family="stable", method="vhc", num=None):
     """The `family` gait of `model` without a guess: homotopy from the model's `reference_gait` (for the compass gait the default
     walker at 3 degrees, thesis Table 1) to `model`, all parameters at once (`_path`), in
     `num` steps with a secant predictor (`None`: at least 16, and no parameter changing
-    by more than 1.5 % in a step; one for the reference walker itself). `method`: `"vhc"` or `"shooting"`. It runs in the
-    walker's own units (`in_own_units`): gravity and size drop out.
+    by more than 1.5 % in a step; one for the reference walker itself). `method`:
+    `"vhc"` or `"shooting"`. It runs in the walker's own units (`in_own_units`): gravity
+    and size drop out.
 
     **Returns:** a `Gait` (never raises; check `result`).
     """

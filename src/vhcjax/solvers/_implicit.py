@@ -169,9 +169,7 @@ def linearised(fn, *static):
             return _apply(fn, eqx.combine(arrays, rest), static)
 
         def call_jvp(primals, tangents):
-            moves = jax.tree_util.tree_map(
-                lambda t: not isinstance(t, SymbolicZero), tangents[0], is_leaf=_is_zero
-            )
+            moves = jax.tree_util.tree_map(lambda t: not _is_zero(t), tangents[0], is_leaf=_is_zero)
             moving, fixed = eqx.partition(primals[0], moves)
             out, J = _jacobian(fn, moving, eqx.combine(fixed, rest), static)
             dmoving = eqx.filter(tangents[0], moves, is_leaf=_is_zero)
