@@ -35,6 +35,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._results import RESULTS
+from ..solvers._implicit import eigenvalues
 from ._actuated import num_inputs
 from ._transverse import (
     HybridTransverseSystem,
@@ -257,11 +258,67 @@ def riccati_backward(
     - `rtol`, `atol`, `max_steps`: settings of the backward integration (Tsit5), `atol`
       in the walker's own units.
 
-    **Returns:** a `RiccatiSolution`.
+    **Returns:** a `RiccatiSolution`. Reverse mode (`jax.grad`) gives its derivatives in
+    every input by the implicit function theorem at the periodic $X(1^-)$.
     """
+    Q, R, Q_jump = weights(model, Q, R, Q_jump)
+    params = (model, system, Q, R, Q_jump)
+    settings = (rtol, atol, max_steps)
+    doms, bases, _, _ = _pieces(system)
+    D = len(doms)
+    # The iterations run on constants; the derivatives of the periodic X(1^-) come from
+    # the implicit function theorem (`_periodic`), those of X(s) from the last sweep.
+    const = _stopped(params)
+    frozen = _around(const, settings)
+
+    def cond(carry):
+        _, change, i, ok = carry
+        return (change > tol) & (i < max_iterations) & ok
+
+    # X(1^-) in the walker's own units
+    own = own_units(const[0], _pieces(const[1])[1][D - 1], const[3])
+
+    def body(carry):
+        X1, _, i, _ = carry
+        X1n, _, ok = frozen(X1, diffrax.SaveAt(t1=True))
+        change = jnp.max(jnp.abs(own(X1n - X1))) / (1.0 + jnp.max(jnp.abs(own(X1n))))
+        ok = ok & jnp.all(jnp.isfinite(X1n))
+        return X1n, change, i + 1, ok
+
+    start = _jump_weights(_pieces(const[1])[1], const[4])[D - 1]
+    X1, change, iters, ok = jax.lax.while_loop(
+        cond, body, (start, jnp.asarray(jnp.inf), jnp.asarray(0), jnp.asarray(True))
+    )
+    X1 = _periodic(params, X1, settings)
+    _, outs, ok_final = _around(params, settings)(X1, diffrax.SaveAt(ts=doms[0].s[::-1]))
+    X_domains = [jax.vmap(_sym)(Xs[::-1]) for Xs in outs]
+    code = RESULTS.where(
+        ok & (change <= tol),
+        RESULTS.successful,
+        RESULTS.where(ok, RESULTS.not_converged, RESULTS.nonfinite),
+    )
+    code = RESULTS.where(ok_final, code, RESULTS.nonfinite)
+    X, K = _stack(system, X_domains, R)
+    r_k = reduce(bases[_pieces(system)[2]], Q).shape[0]
+    nan = jnp.full((r_k,), jnp.nan + 0j)
+    return RiccatiSolution(doms[0].s, X, K, iters, change, nan, code)
+
+
+def _stopped(tree):
+    """`tree` with its float arrays held constant (`stop_gradient`)."""
+    return jax.tree_util.tree_map(
+        lambda x: jax.lax.stop_gradient(x) if eqx.is_inexact_array(x) else x, tree
+    )
+
+
+def _around(params, settings):
+    """`around(X_last, saveat) -> (X(1^-) after one period, X(s) per domain, ok)`: the
+    Riccati equation backward from the end of the last domain through every domain and
+    reset to the end of the period before (`riccati_backward`'s sweep)."""
+    model, system, Q, R, Q_jump = params
+    rtol, atol, max_steps = settings
     doms, bases, _, dom = _pieces(system)
     D = len(doms)
-    Q, R, Q_jump = weights(model, Q, R, Q_jump)
     Rinv = jnp.linalg.inv(R)
     Qs = [reduce(P, Q) for P in bases]
     Qjs = _jump_weights(bases, Q_jump)
@@ -298,7 +355,6 @@ def riccati_backward(
         return _sym(Js[i].T @ X_next @ Js[i] + Qjs[i])
 
     def around(X_last, saveat):
-        """Backward from the end of the last domain to the start of domain 0."""
         X_end, outs, ok = X_last, [jnp.zeros(0)] * D, jnp.asarray(True)
         for i in reversed(range(D)):
             Xs, res = sweeps[i](X_end, saveat)
@@ -309,34 +365,36 @@ def riccati_backward(
                 X_end = jump(i - 1, X_start)
         return jump(D - 1, X_start), outs, ok
 
-    def cond(carry):
-        _, change, i, ok = carry
-        return (change > tol) & (i < max_iterations) & ok
+    return around
 
-    own = own_units(model, bases[D - 1], R)  # X(1^-) in the walker's own units
 
-    def body(carry):
-        X1, _, i, _ = carry
-        X1n, _, ok = around(X1, diffrax.SaveAt(t1=True))
-        change = jnp.max(jnp.abs(own(X1n - X1))) / (1.0 + jnp.max(jnp.abs(own(X1n))))
-        ok = ok & jnp.all(jnp.isfinite(X1n))
-        return X1n, change, i + 1, ok
+@eqx.filter_custom_vjp
+def _periodic(params, X1, settings):
+    r"""The periodic $X(1^-)$ (a fixed point of one backward period, `_around`), found by
+    iteration, with the derivatives of the implicit function theorem: for a cotangent
+    $\bar X$, $\bar p = \lambda^T\,\partial G/\partial p$ with
+    $(I - \partial G/\partial X)^T\lambda = \bar X$, $G$ the period map (reverse mode
+    only: the iterations are never differentiated)."""
+    return X1
 
-    X1, change, iters, ok = jax.lax.while_loop(
-        cond, body, (Qjs[D - 1], jnp.asarray(jnp.inf), jnp.asarray(0), jnp.asarray(True))
-    )
-    _, outs, ok_final = around(X1, diffrax.SaveAt(ts=doms[0].s[::-1]))
-    X_domains = [jax.vmap(_sym)(Xs[::-1]) for Xs in outs]
-    code = RESULTS.where(
-        ok & (change <= tol),
-        RESULTS.successful,
-        RESULTS.where(ok, RESULTS.not_converged, RESULTS.nonfinite),
-    )
-    code = RESULTS.where(ok_final, code, RESULTS.nonfinite)
-    X, K = _stack(system, X_domains, R)
-    r_k = Qs[_pieces(system)[2]].shape[0]
-    nan = jnp.full((r_k,), jnp.nan + 0j)
-    return RiccatiSolution(doms[0].s, X, K, iters, change, nan, code)
+
+@_periodic.def_fwd
+def _periodic_fwd(perturbed, params, X1, settings):
+    return X1, None
+
+
+@_periodic.def_bwd
+def _periodic_bwd(residuals, X_bar, perturbed, params, X1, settings):
+    def period(p, X):
+        return _around(p, settings)(X, diffrax.SaveAt(t1=True))[0]
+
+    k = X1.size
+    _, vjp_X = jax.vjp(lambda X: period(_stopped(params), X), X1)
+    # rows e^T dG/dX: the Jacobian of the period map in X (k = r^2 cotangents)
+    Gx = jax.vmap(lambda e: vjp_X(e.reshape(X1.shape))[0].reshape(-1))(jnp.eye(k))
+    lam = jnp.linalg.solve((jnp.eye(k) - Gx).T, X_bar.reshape(-1))
+    _, vjp_p = eqx.filter_vjp(lambda p: period(p, X1), params)
+    return vjp_p(lam.reshape(X1.shape))[0]
 
 
 def _orbit_rate(model, tp, delta, s, w, domain=None):
@@ -397,6 +455,24 @@ def _hamiltonian_monodromy(Psis, Js, Qjs, start):
     return T[:, :n0] + T[:, n0:] @ costates
 
 
+def _subspace_tangent(M, X0):
+    r"""Zero, with the derivative of $X_0$ (the stable invariant subspace
+    $\{(\zeta, X_0\zeta)\}$ of `M`) from the implicit function theorem: $X_0$ solves
+    $F = M_{21} + M_{22}X_0 - X_0(M_{11} + M_{12}X_0) = 0$, so
+    $(M_{22} - X_0M_{12})\,\mathrm dX - \mathrm dX\,\Lambda = -\partial_MF\,\mathrm dM$,
+    $\Lambda = M_{11} + M_{12}X_0$ (a Sylvester equation: the spectra of its two
+    matrices, the unstable and the stable multipliers, are disjoint). `eig`'s eigenvector
+    derivatives are never taken."""
+    r = X0.shape[0]
+    Mc = jax.lax.stop_gradient(M)
+    Lam = Mc[:r, :r] + Mc[:r, r:] @ X0
+    A = Mc[r:, r:] - X0 @ Mc[:r, r:]
+    L = jnp.kron(A, jnp.eye(r)) - jnp.kron(jnp.eye(r), Lam.T)  # row-major vec
+    F = M[r:, :r] + M[r:, r:] @ X0 - X0 @ (M[:r, :r] + M[:r, r:] @ X0)
+    Y = -jnp.linalg.solve(L, F.reshape(-1)).reshape(r, r)
+    return _sym(Y - jax.lax.stop_gradient(Y))
+
+
 def riccati_hamiltonian(
     model, system, Q=None, R=None, Q_jump=None, *, rtol=1e-12, atol=1e-12, max_steps=8192
 ):
@@ -410,7 +486,9 @@ def riccati_hamiltonian(
     ($X(1^-) = J^TX^+J + Q_J$) and the flow backward from their ends.
 
     **Returns:** a `RiccatiSolution` whose `eigenvalues` are the stable eigenvalues
-    of the monodromy, i.e. the closed-loop multipliers under $u = -K\\zeta$.
+    of the monodromy, i.e. the closed-loop multipliers under $u = -K\\zeta$. Reverse mode
+    (`jax.grad`) gives the derivatives of $X$ and of the eigenvalues in every input by
+    the implicit function theorem at the invariant subspace.
     """
     doms, bases, k, dom = _pieces(system)
     D = len(doms)
@@ -427,10 +505,11 @@ def riccati_hamiltonian(
         ok = ok & (res == diffrax.RESULTS.successful)
     M = _hamiltonian_monodromy([Z[-1] for Z in Psis], Js, Qjs, k)
     r = M.shape[0] // 2
-    ev, V = jnp.linalg.eig(M)
+    ev, V = jnp.linalg.eig(jax.lax.stop_gradient(M))
     idx = jnp.argsort(jnp.abs(ev))[:r]
     U = V[:, idx]
     X0 = _sym(jnp.real(jnp.linalg.solve(U[:r].T, U[r:].T).T))  # U2 U1^-1
+    X0 = X0 + _subspace_tangent(M, X0)
 
     def forward(Zs):
         ri = Zs.shape[0] // 2
@@ -460,6 +539,11 @@ def riccati_hamiltonian(
     residual = jnp.max(jnp.abs(X_domains[k][-1] - Js[k].T @ X_next @ Js[k] - Qjs[k]))
     stable = ev[idx]
     stable = stable[jnp.argsort(-jnp.abs(stable))]
+    # their derivatives: those of the eigenvalues of M on the subspace, M11 + M12 X0
+    lam = eigenvalues(M[:r, :r] + M[:r, r:] @ X0)
+    dlam = lam - jax.lax.stop_gradient(lam)
+    near = jnp.argmin(jnp.abs(jax.lax.stop_gradient(lam)[None, :] - stable[:, None]), axis=1)
+    stable = stable + dlam[near]
     X, K = _stack(system, X_domains, R)
     # A symplectic monodromy has its eigenvalues in pairs (mu, 1/mu): exactly r inside
     # the unit circle, and the subspace they span closes the cycle. Else the monodromy
