@@ -75,6 +75,7 @@ def _sort(ev):
     return ev[jnp.argsort(-jnp.abs(ev))]
 
 
+@stored_jit
 def closed_loop_multipliers_transverse(
     model, system, feedback, *, rtol=1e-12, atol=1e-12, max_steps=8192
 ):

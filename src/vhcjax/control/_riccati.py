@@ -34,6 +34,7 @@ import jax.core
 import jax.numpy as jnp
 import numpy as np
 
+from .._programs import stored_jit
 from .._results import RESULTS
 from ..solvers._implicit import eigenvalues
 from ._actuated import num_inputs
@@ -262,6 +263,16 @@ def riccati_backward(
     every input by the implicit function theorem at the periodic $X(1^-)$.
     """
     Q, R, Q_jump = weights(model, Q, R, Q_jump)
+    settings = dict(rtol=rtol, atol=atol, max_steps=max_steps)
+    return _riccati_backward(
+        model, system, Q, R, Q_jump, tol=tol, max_iterations=max_iterations, **settings
+    )
+
+
+@stored_jit
+def _riccati_backward(model, system, Q, R, Q_jump, *, tol, max_iterations, rtol, atol, max_steps):
+    """`riccati_backward` for checked weights: one compiled program per model class,
+    system shape and settings (a stored program, see `vhcjax._programs`)."""
     params = (model, system, Q, R, Q_jump)
     settings = (rtol, atol, max_steps)
     doms, bases, _, _ = _pieces(system)
@@ -490,9 +501,17 @@ def riccati_hamiltonian(
     (`jax.grad`) gives the derivatives of $X$ and of the eigenvalues in every input by
     the implicit function theorem at the invariant subspace.
     """
+    Q, R, Q_jump = weights(model, Q, R, Q_jump)
+    settings = dict(rtol=rtol, atol=atol, max_steps=max_steps)
+    return _riccati_hamiltonian(model, system, Q, R, Q_jump, **settings)
+
+
+@stored_jit
+def _riccati_hamiltonian(model, system, Q, R, Q_jump, *, rtol, atol, max_steps):
+    """`riccati_hamiltonian` for checked weights: one compiled program per model class,
+    system shape and settings (a stored program, see `vhcjax._programs`)."""
     doms, bases, k, dom = _pieces(system)
     D = len(doms)
-    Q, R, Q_jump = weights(model, Q, R, Q_jump)
     Rinv = jnp.linalg.inv(R)
     Qjs = _jump_weights(bases, Q_jump)
     Js = [reduced_jump(bases, d.J, i) for i, d in enumerate(doms)]

@@ -277,6 +277,13 @@ def transverse_system(model, x_plus, *, num_points=401):
     check_state_shape(model, x_plus, "x_plus")
     if isinstance(num_points, bool) or not isinstance(num_points, int) or num_points < 2:
         raise ValueError(f"num_points must be an integer >= 2, got {num_points!r}")
+    return _transverse_system(model, x_plus, num_points=num_points)
+
+
+@stored_jit
+def _transverse_system(model, x_plus, *, num_points):
+    """`transverse_system` for a checked state and grid: one compiled program per model
+    class and grid size (a stored program, see `vhcjax._programs`)."""
     if is_multidomain(model):
         system = _hybrid_transverse_system(model, x_plus, num_points)
     else:
