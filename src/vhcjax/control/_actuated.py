@@ -118,6 +118,7 @@ def closed_loop_step(model, x0, feedback, config=DEFAULT_CONFIG, alive=True):
     return eqx.tree_at(lambda r: r.result, sr, code)
 
 
+@stored_jit(arrays=("period",))
 def step_torque(model, x0, period, feedback, num_points=64, config=DEFAULT_CONFIG):
     """Input along one step: `u` at `num_points` equally spaced times in `[0, period]`.
 
