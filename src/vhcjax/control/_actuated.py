@@ -127,18 +127,16 @@ def step_torque(model, x0, period, feedback, num_points=64, config=DEFAULT_CONFI
     if is_multidomain(model):
         raise ValueError("step_torque: a multi-domain step has a time grid per domain")
     ts = jnp.linspace(0.0, 1.0, num_points) * period
-    # the solver's interpolant at `ts` (as `SaveAt(ts=...)`, without its host-side check
-    # of the times: a program holding it stays storable)
-    sol = flow(
+    xs = flow(
         model,
         x0,
         period + 1e-12 * model.time_scale,
         config,
-        saveat=diffrax.SaveAt(dense=True),
+        saveat=diffrax.SaveAt(ts=ts),
         event=False,
         vector_field=closed_loop_field(model, feedback),
-    )
-    u = jax.vmap(lambda t: feedback(sol.evaluate(t), model))(ts)
+    ).ys
+    u = jax.vmap(lambda x: feedback(x, model))(xs)
     return ts, u
 
 

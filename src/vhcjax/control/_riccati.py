@@ -36,7 +36,7 @@ import numpy as np
 
 from .._programs import stored_jit
 from .._results import RESULTS
-from ..solvers._implicit import eigenvalues
+from ..solvers._implicit import detach, eigenvalues
 from ._actuated import num_inputs
 from ._transverse import (
     HybridTransverseSystem,
@@ -279,7 +279,7 @@ def _riccati_backward(model, system, Q, R, Q_jump, *, tol, max_iterations, rtol,
     D = len(doms)
     # The iterations run on constants; the derivatives of the periodic X(1^-) come from
     # the implicit function theorem (`_periodic`), those of X(s) from the last sweep.
-    const = _stopped(params)
+    const = detach(params)
     frozen = _around(const, settings)
 
     def cond(carry):
@@ -313,13 +313,6 @@ def _riccati_backward(model, system, Q, R, Q_jump, *, tol, max_iterations, rtol,
     r_k = reduce(bases[_pieces(system)[2]], Q).shape[0]
     nan = jnp.full((r_k,), jnp.nan + 0j)
     return RiccatiSolution(doms[0].s, X, K, iters, change, nan, code)
-
-
-def _stopped(tree):
-    """`tree` with its float arrays held constant (`stop_gradient`)."""
-    return jax.tree_util.tree_map(
-        lambda x: jax.lax.stop_gradient(x) if eqx.is_inexact_array(x) else x, tree
-    )
 
 
 def _around(params, settings):
@@ -400,7 +393,7 @@ def _periodic_bwd(residuals, X_bar, perturbed, params, X1, settings):
         return _around(p, settings)(X, diffrax.SaveAt(t1=True))[0]
 
     k = X1.size
-    _, vjp_X = jax.vjp(lambda X: period(_stopped(params), X), X1)
+    _, vjp_X = jax.vjp(lambda X: period(detach(params), X), X1)
     # rows e^T dG/dX: the Jacobian of the period map in X (k = r^2 cotangents)
     Gx = jax.vmap(lambda e: vjp_X(e.reshape(X1.shape))[0].reshape(-1))(jnp.eye(k))
     lam = jnp.linalg.solve((jnp.eye(k) - Gx).T, X_bar.reshape(-1))

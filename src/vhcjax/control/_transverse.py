@@ -31,6 +31,7 @@ from .._programs import stored_jit
 from .._results import RESULTS, result_codes, results_from_codes
 from ..hybrid import SolverConfig, check_state_shape, multidomain_step
 from ..hybrid._simulate import _units, state_distance
+from ..solvers import diffeqsolve
 from ..stability import GAIT_TOL, guard_normal
 from ._actuated import actuated_vector_field, is_multidomain, num_inputs
 
@@ -161,11 +162,9 @@ def free_units(P, units):
 def solve_in_phase(field, y0, t0, t1, saveat, rtol, atol, max_steps):
     """`diffeqsolve` of `field` over the phase from `t0` to `t1` (either way): Tsit5 with
     a PID controller, failures as diffrax result codes. `atol`: a scalar, or one value
-    per component of `y0` (tolerances in the walker's own units). `SaveAt(ts=...)` is
-    answered from the solver's interpolant (as diffrax does, but without its host-side
-    check of the save times, so that a program holding the solve stays storable)."""
-    ts = saveat.subs.ts if isinstance(saveat.subs, diffrax.SubSaveAt) else None
-    sol = diffrax.diffeqsolve(
+    per component of `y0` (tolerances in the walker's own units); `SaveAt(ts=...)`
+    storable (`solvers.diffeqsolve`)."""
+    return diffeqsolve(
         diffrax.ODETerm(field),
         diffrax.Tsit5(),
         t0=t0,
@@ -173,13 +172,10 @@ def solve_in_phase(field, y0, t0, t1, saveat, rtol, atol, max_steps):
         dt0=None,
         y0=y0,
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
-        saveat=diffrax.SaveAt(dense=True) if ts is not None else saveat,
+        saveat=saveat,
         max_steps=max_steps,
         throw=False,
     )
-    if ts is None:
-        return sol
-    return eqx.tree_at(lambda s: s.ys, sol, jax.vmap(sol.evaluate)(ts), is_leaf=lambda x: x is None)
 
 
 def _tabulate(model, x_start, theta_minus, num_points, domain, x_next):
@@ -205,7 +201,7 @@ def _tabulate(model, x_start, theta_minus, num_points, domain, x_next):
     # a smooth function of s to ~1e-14 (dense output between adaptive steps is not: its
     # error, differentiated by the feedback along the orbit, would show in the closed-loop
     # Poincare map).
-    sol = diffrax.diffeqsolve(
+    sol = diffeqsolve(
         diffrax.ODETerm(field),
         diffrax.Tsit5(),
         t0=0.0,
@@ -213,13 +209,12 @@ def _tabulate(model, x_start, theta_minus, num_points, domain, x_next):
         dt0=1.0 / (num_points - 1),
         y0=y0,
         stepsize_controller=diffrax.ConstantStepSize(),
-        # the interpolant on the grid (as `SaveAt(ts=s)`, without diffrax's host-side
-        # check of the save times: the program stays storable)
-        saveat=diffrax.SaveAt(dense=True),
+        saveat=diffrax.SaveAt(ts=s),
         max_steps=num_points + 8,
         throw=False,
     )
-    ys = jax.vmap(sol.evaluate)(s)
+    ys = sol.ys
+    assert ys is not None  # saved at s
     w = ys[:, :r]
     A, B, c = jax.vmap(lambda ss, ww: phase_matrices(model, theta_plus, delta, ss, ww, domain))(
         s, w

@@ -22,6 +22,7 @@ import optimistix as optx
 from .._batching import bucket_size, host_workers, padded_map
 from .._programs import stored_jit
 from .._results import RESULTS
+from ..solvers import diffeqsolve
 from ..solvers._implicit import linearised
 from ._event_solve import solve_to_event
 
@@ -194,7 +195,7 @@ def flow(
             max_steps=config.max_steps,
             units=_units(model),
         )
-    return diffrax.diffeqsolve(
+    return diffeqsolve(
         diffrax.ODETerm(vf),
         ode_solver(config.solver),
         t0=t0,
@@ -461,17 +462,15 @@ def _simulate(model, x0, count, capacity, config=DEFAULT_CONFIG, dense_points=0)
         )
         if dense_points and not multidomain_dense:
             ts = jnp.linspace(0.0, 1.0, dense_points) * jnp.where(alive, sr.period, 0.0)
-            # the solver's interpolant, evaluated at `ts` (as `SaveAt(ts=...)` does, but
-            # without its host-side check of the times: the program stays storable)
-            sol = flow(
+            ys = flow(
                 model,
                 x,
                 jnp.where(alive, sr.period, 0.0) + 1e-12 * model.time_scale,
                 config,
-                saveat=diffrax.SaveAt(dense=True),
+                saveat=diffrax.SaveAt(ts=ts),
                 event=False,
-            )
-            ys = jax.vmap(sol.evaluate)(ts)
+            ).ys
+            assert ys is not None  # saved at ts
             dense = (ts, jnp.where(alive, ys, x))
         return (x_next, ok, new_fail), (out, dense)
 

@@ -33,6 +33,7 @@ from .._host import host_only
 from .._programs import stored_jit
 from .._results import RESULTS
 from ..hybrid import DEFAULT_CONFIG, FAST_CONFIG, StepResult, classify_solve, flow
+from ..solvers import diffeqsolve
 from ._bisection import Threshold, bisect_threshold
 from ._recovery import first_steps, recover_padded, step_capacity
 
@@ -195,7 +196,7 @@ def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-
         ]
     )
     ts = jnp.asarray(phases, dtype=float) * lin.period
-    sol = diffrax.diffeqsolve(
+    ys = diffeqsolve(
         diffrax.ODETerm(tr.joint_vector_field),
         diffrax.Tsit5(),
         t0=0.0,
@@ -203,16 +204,13 @@ def push_sensitivity_transverse(model, x_star, x_minus, period, phases, rtol=1e-
         dt0=None,
         y0=u0,
         args=(model, E0),
-        # the interpolant at `ts` (as `SaveAt(ts=...)`, without its host-side check of
-        # times that depend on the arguments: the program stays storable)
-        saveat=diffrax.SaveAt(dense=True),
+        saveat=diffrax.SaveAt(ts=ts),
         stepsize_controller=diffrax.PIDController(
             rtol=rtol, atol=atol * tr.joint_state_units(model)
         ),
         max_steps=4096,
         throw=False,
-    )
-    ys = jax.vmap(sol.evaluate)(ts)
+    ).ys
 
     def one(u):
         theta, dtheta, phi, dphi = tr.split_orbit_state(model, u)

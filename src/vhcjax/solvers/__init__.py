@@ -1,6 +1,7 @@
 """Root finders written for the gait searches: damped Newton for one member or a whole
 batch in one loop (per-member convergence, inexact evaluations, chord steps), and thin
-wrappers over optimistix's Levenberg-Marquardt and an optax minimiser."""
+wrappers over optimistix's Levenberg-Marquardt and an optax minimiser; `diffeqsolve`
+with storable save times."""
 
 from ._implicit import (
     detach as detach,
@@ -15,3 +16,4 @@ from ._newton import (
     levenberg_marquardt as levenberg_marquardt,
     optax_minimise as optax_minimise,
 )
+from ._ode import diffeqsolve as diffeqsolve
