@@ -64,9 +64,9 @@ class _ActuatedRod(RodWalker):
 
 def test_the_control_layer_traces_once():
     """Stabilizing a user's gait: a second call of the transverse linearization, both
-    Riccati methods, the closed-loop multipliers and the torque along a step traces
-    nothing; the closed-loop multipliers of the transverse monodromy are those of the
-    Hamiltonian's subspace."""
+    Riccati methods, the closed-loop multipliers, the torque along a step and the jump
+    matrix traces nothing; the closed-loop multipliers of the transverse monodromy are
+    those of the Hamiltonian's subspace."""
 
     def stabilized(psi, z):
         m = _ActuatedRod(psi=psi)
@@ -76,6 +76,8 @@ def test_the_control_layer_traces_once():
         fb = vj.transverse_feedback(system, ric)
         ts, u = vj.step_torque(m, m.section_to_state(z) + 1e-3, 0.5, fb)
         assert np.all(np.isfinite(np.asarray(u)))
+        J, _ = vj.jump_matrix(m, vj.step(m, m.section_to_state(z)).x_minus)
+        assert J.shape == (3, 3) and np.all(np.isfinite(np.asarray(J)))
         return vj.closed_loop_multipliers_transverse(m, system, fb), ham.eigenvalues
 
     a, b = stabilized(jnp.asarray(0.03), _gait_z())

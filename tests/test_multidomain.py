@@ -153,3 +153,30 @@ def test_multidomain_step_refuses_a_single_vector_field(kw):
     """One field for every domain would be silently wrong: refused before any step."""
     with pytest.raises(ValueError, match="one vector field per domain"):
         kw.hybrid_step(jnp.zeros(6), vector_field=lambda t, x, args: jnp.zeros_like(x))
+
+
+_TRACES = [0]
+
+
+class _CountedKneed(KneedWalker):
+    """The kneed walker, counting how often its Python code runs (once per trace)."""
+
+    def potential_energy(self, q):
+        _TRACES[0] += 1
+        return super().potential_energy(q)
+
+
+def test_multidomain_trajectory_follows_the_cycle_and_traces_once():
+    """The dense trajectory of each domain runs from the state entering it to the state
+    at its reset, over its duration (the cycle's events); a second call with another
+    slope and state runs the same program."""
+    m = _CountedKneed(psi=jnp.asarray(0.0504))
+    x0 = m.section_to_state(m.reference_gait()[1])
+    ts, xs, info = vhcjax.multidomain_trajectory(m, x0, 9)
+    assert ts.shape == (2, 9) and xs.shape == (2, 9, 6)
+    np.testing.assert_allclose(ts[:, -1], info.duration, rtol=1e-12)
+    np.testing.assert_allclose(xs[:, 0], info.x_start, atol=1e-12)
+    np.testing.assert_allclose(xs[:, -1], info.x_end, atol=1e-8)
+    before = _TRACES[0]
+    vhcjax.multidomain_trajectory(_CountedKneed(psi=0.05), x0 + 1e-4, 9)
+    assert _TRACES[0] == before

@@ -69,6 +69,7 @@ def _reset(model, x, domain):
     return model.impact(x)[0] if domain is None else model.domain_reset(domain, x)[0]
 
 
+@stored_jit
 def jump_matrix(model, x_minus, domain=None):
     """$J = \\partial\\zeta^+/\\partial\\zeta^-$ at the pre-impact orbit point `x_minus`
     (at the end of domain `domain` of a multi-domain model, into the next domain).

@@ -30,6 +30,7 @@ import jax
 import jax.numpy as jnp
 
 from .. import mechanics as mech
+from .._programs import stored_jit
 from .._results import RESULTS, result_codes, results_from_codes
 from ..mechanics import WalkerModel
 from ._simulate import DEFAULT_CONFIG, StepResult, _swing, flow
@@ -283,6 +284,7 @@ def _domain_grids(model, info, num_points, config, fields=None):
     return jnp.stack(ts_all), jnp.stack(xs_all)
 
 
+@stored_jit
 def multidomain_trajectory(model, x0, num_points=50, config=DEFAULT_CONFIG):
     """Dense trajectory of one cycle, per domain, for plots and invariant checks.
 
