@@ -119,7 +119,7 @@ class Sweep(eqx.Module):
 
 
 #: Largest slope step (rad) between anchors of the coarse continuation.
-ANCHOR_STEP = math.radians(0.1)
+ANCHOR_STEP = math.radians(0.25)
 #: Rounds of retries of the slopes the batched search missed.
 _RETRIES = 4
 #: $|dz^*/d\psi|$ above which a missed slope next to a found one is reported as a fold.
