@@ -9,6 +9,7 @@ import subprocess
 import sys
 import warnings
 
+import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -18,6 +19,7 @@ import pytest
 import vhcjax as vj
 from vhcjax import _programs
 from vhcjax.hybrid import _poincare
+from vhcjax.solvers import diffeqsolve
 
 SCRIPT = """
 import json, logging, math, sys
@@ -371,3 +373,43 @@ def test_the_dense_simulation_is_stored(store, monkeypatch):
     assert counts == {"exported": 1, "loaded": 1, "unexportable": 0}
     np.testing.assert_array_equal(np.asarray(a.dense_x), np.asarray(b.dense_x))
     assert np.asarray(a.dense_x).shape == (2, 7, 4)
+
+
+def _oscillator(solve, fn=None):
+    """`y'' = -y` from (1, 0) over [0, 1], saved at `ts` by `solve`."""
+    term = diffrax.ODETerm(lambda t, y, args: jnp.stack([y[1], -y[0]]))
+
+    def run(y0, ts):
+        saveat = diffrax.SaveAt(ts=ts) if fn is None else diffrax.SaveAt(ts=ts, fn=fn)
+        return solve(
+            term,
+            diffrax.Tsit5(),
+            t0=0.0,
+            t1=1.0,
+            dt0=None,
+            y0=y0,
+            stepsize_controller=diffrax.PIDController(rtol=1e-10, atol=1e-10),
+            saveat=saveat,
+            throw=False,
+        )
+
+    return run
+
+
+def test_save_times_from_the_interpolant_are_storable_and_equal_diffrax():
+    """`solvers.diffeqsolve` answers `SaveAt(ts=...)` from the solver's interpolant: the
+    numbers of diffrax's own save times (and of the exact solution), with a `SaveAt` `fn`
+    too, in a program that `jax.export` stores."""
+    y0, ts = jnp.array([1.0, 0.0]), jnp.linspace(0.0, 1.0, 5)
+    ours, theirs = _oscillator(diffeqsolve)(y0, ts), _oscillator(diffrax.diffeqsolve)(y0, ts)
+    assert ours.ts is not None and ours.ys is not None and theirs.ys is not None
+    np.testing.assert_array_equal(ours.ts, ts)
+    np.testing.assert_allclose(ours.ys, theirs.ys, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(ours.ys[:, 0], np.cos(ts), atol=1e-9)
+    first = lambda t, y, args: y[0]  # noqa: E731
+    ys = np.asarray(_oscillator(diffeqsolve, first)(y0, ts).ys)
+    ref = np.asarray(_oscillator(diffrax.diffeqsolve, first)(y0, ts).ys)
+    np.testing.assert_allclose(ys, ref, rtol=0, atol=1e-15)
+    assert ys.shape == (5,)
+    stored = jax.export.export(jax.jit(lambda y, t: _oscillator(diffeqsolve)(y, t).ys))(y0, ts)
+    np.testing.assert_allclose(stored.call(y0, ts), ours.ys, rtol=0, atol=1e-15)

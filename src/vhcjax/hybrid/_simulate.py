@@ -175,8 +175,9 @@ def flow(
     caller's given as `event`; `event=False`: at `t1`).
 
     Tolerances in the walker's own units (`controller`, `_units`). Low-level building
-    block (also used for pushes and dense output). Returns the diffrax
-    `Solution`.
+    block (also used for pushes and dense output); a `SaveAt(ts=...)` is answered from
+    the solver's interpolant (`solvers.diffeqsolve`: a program holding it is storable).
+    Returns the diffrax `Solution`.
     """
     vf = model.vector_field if vector_field is None else vector_field
     if event is True and saveat is None and adjoint is None:
