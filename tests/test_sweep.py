@@ -141,6 +141,36 @@ def test_real_ends_are_reported_with_their_cause():
     )
 
 
+def test_a_family_on_the_other_root_at_three_degrees_is_followed_to_its_passage():
+    # A light hip (mH/m = 0.2): the unstable family's gait at 3 degrees lies on the stable
+    # root of (5.13) (the family passed a double root between the reference walker and
+    # this one). Followed down the slope it comes back to the unstable root below about
+    # 0.76 degrees, where the sweep finds it and reports the passage.
+    light = vj.CompassGait(mH=1.0)
+    deg = np.array([0.6, 0.7, 0.75, 0.8, 0.9, 3.0])
+    sw = vj.sweep(light, np.radians(deg), "unstable", tangents=False)
+    names = vj.result_names(sw.gaits.result)
+    assert names == ["successful"] * 3 + ["other_root"] + ["other_cycle"] * 2
+    ends = sw.ends()
+    assert [
+        (round(e["last_slope_deg"], 9), round(e["slope_deg"], 9), e["result"]) for e in ends
+    ] == [(0.75, 0.8, "other_root")]
+    for i, d in enumerate(deg):
+        at = light.with_slope(math.radians(d))
+        x = np.asarray(sw.gaits.x_plus[i])
+        A, B, C = vj.gait.quadratic_coefficients(at, x[0], x[2])
+        rel = float((B**2 - 4 * A * C) / B**2)
+        assert 0 <= rel < (1e-4 if d == 0.75 else 0.05)  # near the double root throughout
+        # independently, shooting from the sweep's gait: the same gait, labelled with the
+        # family whose root of (5.13) it lies on
+        family = "unstable" if names[i] == "successful" else "stable"
+        shot = vj.find_gait(at, family, "shooting", guess=x[[0, 2, 3]])
+        np.testing.assert_allclose(np.asarray(shot.x_plus), x, atol=1e-9)
+    # at 3 degrees it is not the stable family's own gait: a second, shorter cycle
+    stable = vj.find_gait(light.with_slope(math.radians(3.0)), "stable")
+    assert float(sw.gaits.T[5]) < float(stable.T) - 0.05
+
+
 def test_a_missed_slope_is_retried_from_its_neighbour():
     """A member the batch missed (here: marked missed by hand) is re-solved from its
     nearest solved neighbour's gait and tangent, to the same gait."""

@@ -224,8 +224,9 @@ def sweep(model, slopes, family="stable", method="auto", *, anchor_step=ANCHOR_S
        on as a gait of the other family are coded `other_root`.
 
     The slopes may come in any order. `Sweep.ends()` says where and why the family ends.
-    `method="auto"` (default) sweeps with the VHC search and then sweeps the slopes it
-    missed by shooting (`Gait.found_by` says which found each gait). The sweep runs in
+    `method="auto"` (default) sweeps with the VHC search and then sweeps by shooting the
+    slopes where it failed (not those where it found a gait of the other family, which
+    shooting finds too; `Gait.found_by` says which found each gait). The sweep runs in
     the walker's own units (`WalkerModel.in_own_units`).
 
     **Returns:** a `Sweep` (`tangent` is $dz^*/d\psi$, zero where no gait was found;
@@ -254,7 +255,10 @@ def sweep(model, slopes, family="stable", method="auto", *, anchor_step=ANCHOR_S
     first = "vhc" if method == "auto" else method
     gaits, tangent, edge_tangent = _sweep(own, psi, family, first, anchor_step, tangents)
     if method == "auto":
-        miss = np.flatnonzero(np.array(gaits.result != RESULTS.successful))
+        # Where the VHC search found the gait and it is one of the other family, shooting
+        # would find the same gait: it searches the slopes where the VHC search failed.
+        found = _on_curve(gaits.result) | (gaits.result == RESULTS.other_root)
+        miss = np.flatnonzero(~np.array(found))
         if miss.size:
             g2, t2, e2 = _sweep(own, psi[miss], family, "shooting", anchor_step, tangents)
             gaits = dataclasses.replace(gaits, method="auto")
@@ -301,18 +305,22 @@ def _sweep(model, psi, family, method, anchor_step, tangents):
 
     # 2. coarse continuation from there over the slope range (path psi = p0 e^s)
     end = model.with_slope(p0 * math.e)
-    pa, za = [], []
+    pa, za, anchor_other = [], [], []
     for grid in (
         _anchor_grid(p0, max(ps[-1], p0), anchor_step),
         _anchor_grid(p0, min(ps[0], p0), anchor_step),
     ):
         g = _run_continuation(anchor_model, end, np.log(grid / p0), z0, sign, method)
-        ok = np.array(g.result == RESULTS.successful)
-        # A sequential continuation past a failure is unreliable: keep the run up to it.
+        # A gait of the other family lies on the same curve of gaits, past a double root
+        # of (5.13) (the continuation carries it): it predicts as well as one of this
+        # family. A sequential continuation past a failure is unreliable: keep the run up
+        # to it.
+        ok = np.array(_on_curve(g.result))
         n_ok = len(ok) if ok.all() else int(np.argmin(ok))
         z = np.asarray(jax.vmap(lambda gg: _unknowns(gg, method))(g))
         pa += list(grid[:n_ok])
         za += list(z[:n_ok])
+        anchor_other += list(np.array(g.result == RESULTS.other_cycle)[:n_ok])
     if not pa:  # not even the first anchor: nothing to predict from
         gaits = find_gaits(
             model, np.repeat(np.asarray(z0)[None], len(ps), 0), family, method, psi=jnp.asarray(ps)
@@ -322,12 +330,11 @@ def _sweep(model, psi, family, method, anchor_step, tangents):
     else:
         pa, uniq = np.unique(np.asarray(pa), return_index=True)
         za = np.asarray(za)[uniq]
+        oa = np.asarray(anchor_other)[uniq]
         ta = _anchor_slopes(pa, za)
         # 3. every slope at once
         guesses = _hermite(ps, pa, za, ta)
-        gaits = find_gaits(
-            model, jnp.asarray(guesses), family, method, psi=jnp.asarray(ps), far=math.inf
-        )
+        gaits = _search_predicted(model, ps, guesses, _predicted_from(ps, pa, oa), family, method)
         gaits, tangent, have = _retry(model, ps, gaits, family, method, sign, anchor_step, tangents)
         gaits, tangent, have = _other_root(model, ps, gaits, tangent, have, family, method)
     # 6. the tangents still wanted: all of them, or those next to a missed slope (a fold?)
@@ -348,6 +355,54 @@ def _sweep(model, psi, family, method, anchor_step, tangents):
         jnp.asarray(tangent[inverse]) if tangents else None,
         jnp.asarray(edge_tangent[inverse]),
     )
+
+
+def _predicted_from(ps, pa, flag):
+    """Slopes `ps` whose prediction (`_hermite`) comes from flagged anchors only: between
+    two flagged anchors, or beyond a flagged end anchor."""
+    import numpy as np
+
+    if len(pa) == 1:
+        return np.full(len(ps), bool(flag[0]))
+    j = np.clip(np.searchsorted(pa, ps) - 1, 0, len(pa) - 2)
+    inside = flag[j] & flag[j + 1]
+    return np.where(ps < pa[0], flag[0], np.where(ps > pa[-1], flag[-1], inside))
+
+
+def _search_predicted(model, ps, guesses, other, family, method):
+    """`find_gaits` at the slopes `ps` from the predictions `guesses`; those predicted
+    from gaits of the other family (`other`) are searched as that family, whose root of
+    (5.13) maps their guesses to the search's unknowns, and coded from this family's
+    side (a gait of the other family: `other_cycle`)."""
+    import numpy as np
+
+    def search(idx, fam):
+        return find_gaits(
+            model, jnp.asarray(guesses[idx]), fam, method, psi=jnp.asarray(ps[idx]), far=math.inf
+        )
+
+    if not other.any():
+        return search(slice(None), family)
+    there = search(np.flatnonzero(other), _other_family(family))
+    swap = jax.vmap(
+        lambda r: RESULTS.where(
+            r == RESULTS.successful,
+            RESULTS.other_cycle,
+            RESULTS.where(r == RESULTS.other_cycle, RESULTS.successful, r),
+        )
+    )
+    there = _relabel(eqx.tree_at(lambda g: g.result, there, swap(there.result)), family)
+    if other.all():
+        return there
+    here = search(np.flatnonzero(~other), family)
+    gaits = jax.tree_util.tree_map(lambda x: x[np.zeros(len(ps), int)], here)
+    gaits = _put_members(gaits, np.flatnonzero(~other), here)
+    return _put_members(gaits, np.flatnonzero(other), there)
+
+
+def _on_curve(result):
+    """Gaits found, of this family or (past a double root of (5.13)) the other."""
+    return (result == RESULTS.successful) | (result == RESULTS.other_cycle)
 
 
 def _edges(ok):
