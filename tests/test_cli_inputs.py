@@ -412,11 +412,16 @@ def test_a_sweep_that_finds_nothing_says_why():
     from vhcjax.cli._gait import _none_found
 
     rows = [{"result": "singular_phi_ode"}] * 3 + [{"result": "not_converged"}]
-    reason = _none_found(rows, "vhc")
+    reason = _none_found(rows, "vhc", "stable")
     assert reason.startswith("no gait found: singular_phi_ode at 3 slopes, not_converged at 1")
     assert "phi'' ODE is singular" in reason and reason.endswith("try --method auto")
-    assert _none_found([{"result": "fell"}], "shooting").endswith("try --method auto")
-    assert not _none_found([{"result": "fell"}], "auto").endswith("auto")
+    assert _none_found([{"result": "fell"}], "shooting", "stable").endswith("try --method auto")
+    assert not _none_found([{"result": "fell"}], "auto", "stable").endswith("auto")
+    # a family followed onto the other root of (5.13) at every slope (a light hip's
+    # unstable family at 2-4 degrees, tests/test_sweep.py) is said to be that
+    reason = _none_found([{"result": "other_cycle"}] * 5, "auto", "unstable")
+    assert reason.startswith("no gait found: other_cycle at 5 slopes")
+    assert "other root of the energy quadratic (5.13), of the stable family" in reason
 
 
 def test_robustness_commands_analyse_the_gait_that_gait_finds(capsys):

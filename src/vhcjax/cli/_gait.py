@@ -265,8 +265,9 @@ def _print_gait(args, gait, rec, stab):
     print(f"  verdict: {verdict_words(stab['stable'], stab['max_abs_multiplier'])}")
 
 
-def _none_found(rows, method):
-    """Why a sweep found no gait: the result codes met, by count, and the other method."""
+def _none_found(rows, method, family):
+    """Why a sweep found no gait: the result codes met, by count, and the other method;
+    where the family was followed onto the other root of (5.13), that."""
     from collections import Counter
 
     from .._results import RESULTS
@@ -275,6 +276,13 @@ def _none_found(rows, method):
     parts = [f"{name} at {n} slope{'s' if n > 1 else ''}" for name, n in codes]
     first = RESULTS[getattr(RESULTS, codes[0][0])]
     hint = "" if method == "auto" else "; try --method auto"
+    if codes[0][0] == "other_cycle":
+        other = "stable" if family == "unstable" else "unstable"
+        hint = (
+            f"; the {family} family, followed from the default walker at 3 deg, is there a "
+            f"gait on the other root of the energy quadratic (5.13), of the {other} family: "
+            "it passes a double root of (5.13) on the way"
+        )
     return f"no gait found: {', '.join(parts)} ({first.rstrip('.')}){hint}"
 
 
@@ -458,7 +466,7 @@ def run_sweep(args):
         summary[fam] = {"found": n_ok, "total": len(slopes), "ends": sw.ends()}
         summary[fam]["found_by_shooting"] = sum(r["method"] == "shooting" for r in rows[fam])
         if n_ok == 0:  # no end to report: say why nothing was found
-            summary[fam]["reason"] = _none_found(rows[fam], args.method)
+            summary[fam]["reason"] = _none_found(rows[fam], args.method, fam)
     if args.json:
         print_json(
             {
