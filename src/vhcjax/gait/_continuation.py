@@ -11,7 +11,7 @@ import jax.numpy as jnp
 
 from .._batching import report
 from .._programs import stored_jit
-from .._results import RESULTS, result_codes
+from .._results import RESULTS
 from ._dispatch import _check, _relabel, _search
 from ._gait import family_sign, gait_in_units, section_in_units
 from ._problem1 import vhc_residual
@@ -23,6 +23,12 @@ from ._shooting import _shoot_eval
 # ---------------------------------------------------------------------------------------
 def _unknowns(gait, method):
     return jnp.stack([gait.a, gait.b]) if method == "vhc" else jnp.stack([gait.a, gait.b, gait.f])
+
+
+def _on_curve(result):
+    """Gaits found, of the family sought or (past a double root of (5.13)) of the other:
+    points on one curve of gaits. Traceable."""
+    return (result == RESULTS.successful) | (result == RESULTS.other_cycle)
 
 
 def _residual(model, z, sign, method):
@@ -105,7 +111,7 @@ def _continue(start, end, s_buf, n, z0, sign, method, s_prev=None, z_prev=None):
         gait = search(s, z_good + slope * (s - s_good), *consts)
         # a gait of the other family (its d the other root of 5.13) lies on the same
         # curve of gaits, past a double root: it carries the predictor too
-        ok = (gait.result == RESULTS.successful) | (gait.result == RESULTS.other_cycle)
+        ok = _on_curve(gait.result)
         z_new = _unknowns(gait, method)
         buf = jax.tree_util.tree_map(lambda b, v: b.at[i].set(v), buf, gait)
         # a point equal to the last success (the seed re-solved) keeps the older one
@@ -158,10 +164,7 @@ def _run_continuation(start, end, s_values, z0, sign, method):
         gaits = jax.tree_util.tree_map(lambda x: x[skip:k], jax.device_get(out))
         parts.append(gaits)
         # the last two successes so far carry the secant line into the next call
-        code = np.asarray(result_codes(gaits.result))
-        ok = np.flatnonzero(
-            (code == result_codes(RESULTS.successful)) | (code == result_codes(RESULTS.other_cycle))
-        )
+        ok = np.flatnonzero(np.asarray(_on_curve(gaits.result)))
         solved = [(s_prev, z_prev), (s_start, z_start)] + [
             (new[i], np.asarray(_unknowns(jax.tree_util.tree_map(lambda x: x[i], gaits), method)))
             for i in ok[-2:]

@@ -17,7 +17,7 @@ from .._batching import padded_map
 from .._host import host_only
 from .._programs import stored_jit
 from .._results import RESULTS, result_codes
-from ._continuation import _run_continuation, _tangent, _unknowns, continue_to_model
+from ._continuation import _on_curve, _run_continuation, _tangent, _unknowns, continue_to_model
 from ._dispatch import _check, _relabel, vhc_applies
 from ._find import _gaits_in_units, _prefer, find_gaits
 from ._gait import Gait, family_sign
@@ -398,11 +398,6 @@ def _search_predicted(model, ps, guesses, other, family, method):
     gaits = jax.tree_util.tree_map(lambda x: x[np.zeros(len(ps), int)], here)
     gaits = _put_members(gaits, np.flatnonzero(~other), here)
     return _put_members(gaits, np.flatnonzero(other), there)
-
-
-def _on_curve(result):
-    """Gaits found, of this family or (past a double root of (5.13)) the other."""
-    return (result == RESULTS.successful) | (result == RESULTS.other_cycle)
 
 
 def _edges(ok):
